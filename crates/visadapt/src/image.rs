@@ -1,0 +1,188 @@
+//! The two images of the model: the world as the world observer sees it ([`HdrImage`],
+//! absolute CIE XYZ and scotopic luminance), and what the display shows
+//! ([`DisplayImage`], linear display RGB relative to the display maximum).
+//!
+//! Both are stored as flat, planar `f32` buffers (one `Vec<f32>` per channel, row-major,
+//! top row first), the layout every hot loop of the library works on.
+
+/// A high-dynamic-range image in absolute photometric units.
+///
+/// * `x`, `y`, `z`: CIE 1931 tristimulus values with `y` the photopic luminance in cd/m².
+/// * `scotopic`: the scotopic luminance in scotopic cd/m² (CIE 1951 V'(λ), K'm = 1700 lm/W),
+///   when the source carried it (the paper's own file format does). When it is `None`, the
+///   operator estimates it from XYZ (see [`scotopic`](crate::scotopic)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HdrImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// CIE X plane (same scale as `y`).
+    pub x: Vec<f32>,
+    /// CIE Y plane: photopic luminance in cd/m².
+    pub y: Vec<f32>,
+    /// CIE Z plane (same scale as `y`).
+    pub z: Vec<f32>,
+    /// Scotopic luminance plane in scotopic cd/m², if the file had one.
+    pub scotopic: Option<Vec<f32>>,
+    /// The camera view, when the file records it (Radiance `VIEW=`).
+    pub view: Option<View>,
+    /// True when the values are known to be absolute (cd/m²): Radiance files (179 lm/W
+    /// convention), EXR files with `whiteLuminance` or the paper's X/Y/Z/scotopic layout.
+    /// False when the file only holds relative values (PFM, plain EXR RGB), which the
+    /// caller should scale (the CLI's `--scale` / `--peak`).
+    pub absolute_units: bool,
+}
+
+impl HdrImage {
+    /// An image of `width × height` pixels, all zero, without a scotopic plane.
+    pub fn zeros(width: usize, height: usize) -> Self {
+        let n = width * height;
+        HdrImage {
+            width,
+            height,
+            x: vec![0.0; n],
+            y: vec![0.0; n],
+            z: vec![0.0; n],
+            scotopic: None,
+            view: None,
+            absolute_units: false,
+        }
+    }
+
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        self.width * self.height
+    }
+
+    /// True if the image has no pixels.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Multiply every luminance (X, Y, Z and scotopic) by `factor`, e.g. to turn relative
+    /// values into cd/m².
+    pub fn scale(&mut self, factor: f32) {
+        for plane in [&mut self.x, &mut self.y, &mut self.z] {
+            plane.iter_mut().for_each(|v| *v *= factor);
+        }
+        if let Some(s) = &mut self.scotopic {
+            s.iter_mut().for_each(|v| *v *= factor);
+        }
+    }
+
+    /// Check that every plane has `width × height` samples.
+    pub fn check_consistent(&self) -> crate::Result<()> {
+        let n = self.len();
+        let bad = self.x.len() != n
+            || self.y.len() != n
+            || self.z.len() != n
+            || self.scotopic.as_ref().is_some_and(|s| s.len() != n);
+        if bad || n == 0 {
+            return Err(crate::Error::invalid(
+                "image",
+                format!("{}x{}", self.width, self.height),
+                "planes must be non-empty and hold width*height samples",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// How the image maps directions to pixels, as far as acuity needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct View {
+    /// The projection.
+    pub projection: Projection,
+    /// Full horizontal field of view in degrees.
+    pub horizontal_deg: f64,
+    /// Full vertical field of view in degrees.
+    pub vertical_deg: f64,
+}
+
+/// Camera projections (the Radiance `-vt` view types).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Projection {
+    /// Planar perspective (`-vtv`): pixels are uniform on the image plane.
+    Perspective,
+    /// Angular fisheye (`-vta`): pixels are uniform in angle from the centre.
+    AngularFisheye,
+    /// Hemispherical fisheye (`-vth`): pixels are uniform in sin(angle).
+    HemisphericalFisheye,
+    /// Cylindrical panorama (`-vtc`): uniform in angle horizontally.
+    Cylindrical,
+    /// Stereographic planisphere (`-vts`).
+    Planisphere,
+    /// Parallel (`-vtl`): no angular extent, acuity cannot be derived from it.
+    Parallel,
+}
+
+impl View {
+    /// A perspective view with the given horizontal field of view, the vertical one
+    /// following from the aspect ratio.
+    pub fn perspective(horizontal_deg: f64, width: usize, height: usize) -> Self {
+        let half = (horizontal_deg.to_radians() / 2.0).tan() * height as f64 / width as f64;
+        View {
+            projection: Projection::Perspective,
+            horizontal_deg,
+            vertical_deg: 2.0 * half.atan().to_degrees(),
+        }
+    }
+
+    /// Pixels per degree of visual angle at the image centre, where the eye looks, for an
+    /// image `width` pixels wide. `None` for a parallel view or a degenerate angle.
+    ///
+    /// * perspective: `(W/2) / tan(fov/2) · π/180` (the derivative of the projection at the centre);
+    /// * angular fisheye and cylindrical: `W / fov` (uniform in angle);
+    /// * hemispherical fisheye (`r ∝ sin θ`, `r = W/2` at `θ = fov/2`): `(W/2)/sin(fov/2) · π/180`;
+    /// * planisphere (`r ∝ tan(θ/2)`): `(W/2)/(2 tan(fov/4)) · π/180`.
+    pub fn pixels_per_degree(&self, width: usize) -> Option<f64> {
+        let w = width as f64;
+        let fov = self.horizontal_deg;
+        if !(fov.is_finite() && fov > 0.0) {
+            return None;
+        }
+        let deg = std::f64::consts::PI / 180.0;
+        let half = (fov / 2.0).to_radians();
+        let ppd = match self.projection {
+            Projection::Perspective if fov < 180.0 => (w / 2.0) / half.tan() * deg,
+            Projection::Perspective => return None,
+            Projection::AngularFisheye | Projection::Cylindrical => w / fov,
+            Projection::HemisphericalFisheye => (w / 2.0) / half.sin().max(1e-9) * deg,
+            Projection::Planisphere => (w / 2.0) / (2.0 * (half / 2.0).tan()) * deg,
+            Projection::Parallel => return None,
+        };
+        (ppd.is_finite() && ppd > 0.0).then_some(ppd)
+    }
+}
+
+/// What the display shows: linear display RGB (Rec. 709 / sRGB primaries, D65 white),
+/// planar, relative to the display maximum luminance (1.0 = `L_dmax`), each value in
+/// `[0, 1]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DisplayImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Linear red plane.
+    pub r: Vec<f32>,
+    /// Linear green plane.
+    pub g: Vec<f32>,
+    /// Linear blue plane.
+    pub b: Vec<f32>,
+    /// The display maximum luminance in cd/m² that 1.0 stands for.
+    pub display_max_cd_m2: f32,
+}
+
+impl DisplayImage {
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        self.width * self.height
+    }
+
+    /// True if the image has no pixels.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}

@@ -1,0 +1,45 @@
+//! # visadapt
+//!
+//! What a human observer would actually see in a high-dynamic-range scene, from sunlight
+//! down to starlight: an implementation of Ferwerda, Pattanaik, Shirley and Greenberg,
+//! *A Model of Visual Adaptation for Realistic Image Synthesis*, SIGGRAPH 1996.
+//!
+//! The library is organised one module per idea of the model:
+//!
+//! | module | models | paper |
+//! |---|---|---|
+//! | [`tvi`] | cone and rod threshold-versus-intensity curves | Eq. 4, Eq. 5, Fig. 3 |
+//! | [`scale`] | Ward's contrast scale factor, photopic and rod operators | Eq. 1–3, Sec. 4 |
+//! | [`mesopic`] | the rod weight `k` of the mesopic combination | Eq. 6 |
+//! | [`scotopic`] | scotopic luminance from XYZ when no scotopic channel exists | Sec. 2.2, Fig. 2 |
+//! | [`adaptation`] | world and display adaptation luminances | Sec. 4.4 |
+//! | [`acuity`] | highest resolvable frequency and the acuity Gaussian | Sec. 4.1, Eq. 7, Fig. 7 |
+//! | [`blur`] | a Gaussian blur whose cost does not grow with sigma | Sec. 4.1 |
+//! | [`colour`] | RGB primaries, XYZ, sRGB output | Sec. 4 |
+//! | [`operator`] | the whole steady-state operator, with a report | Sec. 4 |
+//! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
+//! | [`io`] | Radiance, OpenEXR and PFM in; PNG, JPEG and EXR out | — |
+//!
+//! Units are in the names: `_cd_m2` is photopic cd/m², `_scotopic_cd_m2` is scotopic cd/m²
+//! (CIE 1951 V'(λ), K'm = 1700 lm/W), `_deg` degrees of visual angle, `_px` pixels.
+#![forbid(unsafe_code)]
+#![warn(missing_docs, missing_debug_implementations)]
+
+pub mod acuity;
+pub mod adaptation;
+pub mod blur;
+pub mod colour;
+mod error;
+mod image;
+pub mod io;
+mod limits;
+pub mod mesopic;
+pub mod observer;
+pub mod operator;
+pub mod scale;
+pub mod scotopic;
+pub mod tvi;
+
+pub use error::{Error, LimitsExceeded, Result};
+pub use image::{DisplayImage, HdrImage, Projection, View};
+pub use limits::Limits;
