@@ -1,1 +1,192 @@
-//! TODO
+//! Visual acuity and the Gaussian that removes detail the world observer cannot resolve.
+//!
+//! Ferwerda et al. 1996, Sec. 3.4 and Fig. 7 (Shaler 1937: the highest resolvable grating
+//! frequency falls from about 50 cycles/degree at 3 log cd/m² to about 2 at −3.3 log cd/m²)
+//! and Sec. 4.1, Eq. 7: the image is filtered with a Gaussian `f` whose Fourier transform at
+//! the cutoff frequency `ω_c(L_wa)` equals the threshold contrast `t(L_wa)/L_wa`, so that a
+//! full-contrast grating at the cutoff is shown exactly at threshold.
+//!
+//! # Cutoff frequency
+//!
+//! Ward Larson, Rushmeier and Piatko 1997 (IEEE TVCG 3(4), Eq. 15) fitted Shaler's data as
+//! `ω_c(L) = 17.25·atan(1.4·log10 L + 0.35) + 25.72` cycles/degree (L in cd/m²): 49.1 at
+//! 3 log cd/m², 2.6 at −3.3, matching Fig. 7. Below 1e-9 cd/m² the fit turns negative; we
+//! hold it at [`MIN_CUTOFF_CYCLES_PER_DEGREE`].
+//!
+//! # The Gaussian
+//!
+//! A unit-area Gaussian of standard deviation `s` (degrees) has the transfer function
+//! `F(ω) = exp(−2π²s²ω²)`. Solving `F(ω_c) = c` gives
+//! `s = sqrt(ln(1/c)/2) / (π·ω_c)`. The threshold contrast `c` is that of the more
+//! sensitive system: `c = min(t_p(L_wa)/L_wa, t_s(L_wa,s)/L_wa,s)` (Eq. 4, 5; Weber contrast
+//! is unit-free, so each system uses its own luminance), as Ward Larson et al. 1997 combine
+//! the two curves at their crossover.
+//!
+//! # Fallback below the rod Weber range
+//!
+//! Eq. 7 read literally misbehaves at night: below the rod Weber range (scotopic adaptation
+//! under 10^-1.44 scotopic cd/m², Eq. 5) the threshold contrast rises toward 1, which makes
+//! `ln(1/c)` and thus the blur *shrink* as light falls, and once `c ≥ 1` (below about
+//! 2.6e-3 cd/m²) the equation has no solution at all. There the threshold contrast is held
+//! at the rod Weber fraction 10^-0.395 = 0.403 (Eq. 5's upper branch), so the blur keeps
+//! growing as the cutoff frequency falls, continuously and monotonically. The report flags
+//! when this fallback is in use.
+
+use crate::tvi::{
+    cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2, ROD_WEBER_OFFSET_LOG,
+};
+use std::f64::consts::PI;
+
+/// Ward Larson et al. 1997, Eq. 15: amplitude of the arctangent fit to Shaler (1937).
+const FIT_AMPLITUDE: f64 = 17.25;
+/// Ward Larson et al. 1997, Eq. 15: slope of log luminance inside the arctangent.
+const FIT_SLOPE: f64 = 1.4;
+/// Ward Larson et al. 1997, Eq. 15: offset inside the arctangent.
+const FIT_OFFSET: f64 = 0.35;
+/// Ward Larson et al. 1997, Eq. 15: additive constant, cycles/degree.
+const FIT_BASE: f64 = 25.72;
+
+/// Floor on the cutoff frequency where the fit would fall below it (under ~1e-8 cd/m², far
+/// below the absolute threshold of vision); the value follows the project's model notes §2.1.
+pub const MIN_CUTOFF_CYCLES_PER_DEGREE: f64 = 0.5;
+
+/// Grating frequency of 20/20 vision: a 1 arcminute stroke, i.e. 30 cycles/degree (Snellen
+/// letters are 5 arcmin tall on a 5×5 stroke grid).
+pub const SNELLEN_20_20_CYCLES_PER_DEGREE: f64 = 30.0;
+
+/// The highest resolvable spatial frequency (cycles/degree) for an observer adapted to
+/// `adaptation_cd_m2` (photopic cd/m²): Ward Larson et al. 1997 Eq. 15, fitted to Shaler 1937.
+pub fn cutoff_cycles_per_degree(adaptation_cd_m2: f64) -> f64 {
+    let l = adaptation_cd_m2.log10();
+    let r = FIT_AMPLITUDE * (FIT_SLOPE * l + FIT_OFFSET).atan() + FIT_BASE;
+    if r.is_nan() {
+        return r;
+    }
+    r.max(MIN_CUTOFF_CYCLES_PER_DEGREE)
+}
+
+/// Snellen fraction "20/x" for a grating acuity in cycles/degree, x rounded to a whole
+/// number (50 c/deg → "20/12", 2 c/deg → "20/300", as in paper Sec. 3.4).
+pub fn snellen(cycles_per_degree: f64) -> String {
+    let x = 20.0 * SNELLEN_20_20_CYCLES_PER_DEGREE / cycles_per_degree;
+    format!("20/{:.0}", x)
+}
+
+/// The threshold contrast `t(L)/L` of the more sensitive system (Eq. 4, Eq. 5).
+pub fn threshold_contrast(adaptation_cd_m2: f64, adaptation_scotopic_cd_m2: f64) -> f64 {
+    let cone = cone_threshold_cd_m2(adaptation_cd_m2) / adaptation_cd_m2;
+    let rod = rod_threshold_scotopic_cd_m2(adaptation_scotopic_cd_m2) / adaptation_scotopic_cd_m2;
+    cone.min(rod)
+}
+
+/// The rod Weber fraction `10^-0.395` (Eq. 5's upper branch), the threshold contrast held
+/// below the rod Weber range (see the module docs).
+pub fn rod_weber_fraction() -> f64 {
+    10f64.powf(ROD_WEBER_OFFSET_LOG)
+}
+
+/// The acuity filter of Eq. 7 for a world adaptation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AcuityFilter {
+    /// Highest resolvable frequency `ω_c`, cycles/degree.
+    pub cutoff_cycles_per_degree: f64,
+    /// Threshold contrast `t(L_wa)/L_wa` of the more sensitive system, as computed.
+    pub threshold_contrast: f64,
+    /// The contrast the filter passes at the cutoff (differs from `threshold_contrast`
+    /// only in the fallback).
+    pub gain_at_cutoff: f64,
+    /// True when the fallback below the rod Weber range is in use.
+    pub fallback: bool,
+    /// Standard deviation of the Gaussian, degrees of visual angle.
+    pub sigma_deg: f64,
+}
+
+impl AcuityFilter {
+    /// The Eq. 7 Gaussian for photopic adaptation `adaptation_cd_m2` (sets the cutoff) and
+    /// scotopic adaptation `adaptation_scotopic_cd_m2` (with it, the threshold contrast).
+    pub fn new(adaptation_cd_m2: f64, adaptation_scotopic_cd_m2: f64) -> Self {
+        let cutoff = cutoff_cycles_per_degree(adaptation_cd_m2);
+        let c = threshold_contrast(adaptation_cd_m2, adaptation_scotopic_cd_m2);
+        let weber = rod_weber_fraction();
+        let fallback = !(c <= weber);
+        let gain = if fallback { weber } else { c };
+        let sigma_deg = (gain.recip().ln() / 2.0).sqrt() / (PI * cutoff);
+        AcuityFilter {
+            cutoff_cycles_per_degree: cutoff,
+            threshold_contrast: c,
+            gain_at_cutoff: gain,
+            fallback,
+            sigma_deg,
+        }
+    }
+
+    /// Frequency response of the filter at `cycles_per_degree`.
+    pub fn response(&self, cycles_per_degree: f64) -> f64 {
+        (-2.0 * PI * PI * self.sigma_deg * self.sigma_deg * cycles_per_degree * cycles_per_degree)
+            .exp()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cutoff_matches_fig7_and_ward_larson_examples() {
+        // Paper Sec. 3.4 / Fig. 7: ~50 c/deg at 3 log cd/m², ~2 c/deg at −3.3 log cd/m².
+        assert!((cutoff_cycles_per_degree(1e3) - 49.1).abs() < 0.1);
+        assert!((cutoff_cycles_per_degree(10f64.powf(-3.3)) - 2.59).abs() < 0.05);
+        // Ward Larson 1997 text: 25 cd/m² gives ~45 c/deg and 0.05 cd/m² gives ~9 c/deg.
+        assert!((cutoff_cycles_per_degree(25.0) - 45.0).abs() < 1.0);
+        assert!((cutoff_cycles_per_degree(0.05) - 9.0).abs() < 0.5);
+        // Hand computation: 1 cd/m² → 17.25·atan(0.35) + 25.72 = 31.53.
+        assert!((cutoff_cycles_per_degree(1.0) - 31.533).abs() < 0.01);
+        assert_eq!(cutoff_cycles_per_degree(0.0), MIN_CUTOFF_CYCLES_PER_DEGREE);
+    }
+
+    #[test]
+    fn snellen_fractions() {
+        assert_eq!(snellen(30.0), "20/20");
+        assert_eq!(snellen(2.0), "20/300");
+        assert_eq!(snellen(49.1), "20/12");
+    }
+
+    #[test]
+    fn eq7_response_at_cutoff_is_threshold_contrast() {
+        for l in [0.5, 1.0, 3.0, 10.0, 100.0, 1e4] {
+            let f = AcuityFilter::new(l, l * 2.261);
+            assert!(!f.fallback);
+            let got = f.response(f.cutoff_cycles_per_degree);
+            assert!((got - f.threshold_contrast).abs() < 1e-12, "{l}: {got}");
+        }
+        // Hand computation at 10 cd/m²: c = t_p(10)/10 = 10^(0.02996-1) = 0.10714,
+        // ω_c = 17.25·atan(1.75) + 25.72 = 43.90; s = sqrt(ln(1/c)/2)/(π ω_c) = 0.007655 deg.
+        let f = AcuityFilter::new(10.0, 22.61);
+        assert!((f.threshold_contrast - 0.107_14).abs() < 2e-4);
+        assert!((f.sigma_deg - 0.007_655).abs() < 2e-5, "{}", f.sigma_deg);
+    }
+
+    #[test]
+    fn fallback_below_rod_weber_range_is_continuous_and_monotone() {
+        // Weber fraction 0.4027 in the rod Weber range.
+        let f = AcuityFilter::new(0.1, 0.2261);
+        assert!((f.threshold_contrast - 0.402_7).abs() < 1e-3 && !f.fallback);
+        // Where t/L ≥ 1 (1e-3 cd/m²) Eq. 7 has no solution: fallback, finite blur.
+        let f = AcuityFilter::new(1e-3, 2.261e-3);
+        assert!(f.threshold_contrast >= 1.0 && f.fallback);
+        assert!(f.sigma_deg.is_finite() && f.sigma_deg > 0.0);
+        assert!((f.response(f.cutoff_cycles_per_degree) - rod_weber_fraction()).abs() < 1e-12);
+        // Below the rod Weber range the blur never shrinks as the light falls. (Above it,
+        // Eq. 7 itself is not monotone: between 10 and 1 cd/m² the threshold contrast
+        // rises faster than the cutoff falls and sigma dips by ~10 %; that is the paper's.)
+        let mut prev = 0.0;
+        for i in (0..=1000).rev() {
+            let l = 10f64.powf(-8.0 + i as f64 * 0.0064); // 1e-8 .. 2.5e-2 cd/m²
+            let s = AcuityFilter::new(l, l * 2.261).sigma_deg;
+            assert!(s.is_finite());
+            assert!(s >= prev, "blur shrinks at {l}: {s} < {prev}");
+            prev = s;
+        }
+        assert!(AcuityFilter::new(1e-3, 2.261e-3).sigma_deg > AcuityFilter::new(0.1, 0.2261).sigma_deg);
+    }
+}
