@@ -1,1 +1,51 @@
-fn main() {}
+//! `visadapt`: the command-line front end of the visadapt library.
+//!
+//! Parses arguments, reports progress and errors, and calls the library; all the model
+//! lives in the library crate.
+
+mod cli;
+mod commands;
+mod report;
+
+use clap::Parser;
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))
+        .format_target(false)
+        .format_timestamp(None)
+        .init();
+    let cli = match cli::Cli::try_parse() {
+        Ok(cli) => cli,
+        // Usage errors: one line (clap's first), exit status 2 as clap does.
+        Err(e) if e.use_stderr() => {
+            let text = e.to_string();
+            let line: Vec<&str> = text
+                .lines()
+                .take_while(|l| {
+                    !l.starts_with("Usage:")
+                        && !l.starts_with("For more information")
+                        && !l.trim_start().starts_with("tip:")
+                })
+                .map(str::trim)
+                .filter(|l| !l.is_empty())
+                .collect();
+            eprintln!("visadapt: {}", line.join(" "));
+            return ExitCode::from(2);
+        }
+        // --help and --version.
+        Err(e) => e.exit(),
+    };
+    let result = match cli.command {
+        cli::Command::Map(args) => commands::map::run(args),
+        cli::Command::Observer(args) => commands::observer::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line: the context chain joined with ": ".
+            eprintln!("visadapt: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

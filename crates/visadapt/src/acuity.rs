@@ -108,7 +108,8 @@ impl AcuityFilter {
         let cutoff = cutoff_cycles_per_degree(adaptation_cd_m2);
         let c = threshold_contrast(adaptation_cd_m2, adaptation_scotopic_cd_m2);
         let weber = rod_weber_fraction();
-        let fallback = !(c <= weber);
+        // NaN (no adaptation information) also takes the fallback.
+        let fallback = c.is_nan() || c > weber;
         let gain = if fallback { weber } else { c };
         let sigma_deg = (gain.recip().ln() / 2.0).sqrt() / (PI * cutoff);
         AcuityFilter {

@@ -13,7 +13,7 @@
 //! exceed, with `f` = [`DEFAULT_HOT_PIXEL_FRACTION`] = 0.1 % by default (about 2000 pixels,
 //! a 45 × 45 pixel patch, of a 1920 × 1080 image). Non-finite and negative values count as
 //! zero. The quantile is exact, computed in O(n) with a histogram on the f32 bit pattern
-//! followed by a selection inside the one bin that holds it.
+//! refined by a second pass inside the one bin that holds it.
 
 /// Default fraction of pixels allowed to be brighter than the "highest visible" luminance.
 /// A project choice (see the module docs), overridable by the caller.
@@ -34,74 +34,85 @@ pub fn highest_visible(values: &[f32], fraction: f64) -> f32 {
 
 /// [`highest_visible`] of values produced by `value(i)` for `i` in `0..n` (so that derived
 /// channels, e.g. a scotopic estimate, need no buffer of their own).
+///
+/// Exact, in two histogram passes over the IEEE-754 bit pattern (which orders like the
+/// value for non-negative floats): the high 16 bits find the bin holding the wanted rank,
+/// the low 16 bits of the samples in that bin find the sample itself.
 pub fn highest_visible_by(n: usize, value: impl Fn(usize) -> f32 + Sync, fraction: f64) -> f32 {
     if n == 0 {
         return 0.0;
     }
-    let clean = |v: f32| if v.is_finite() && v > 0.0 { v } else { 0.0 };
     let fraction = if fraction.is_nan() { 0.0 } else { fraction.clamp(0.0, 1.0) };
     // Number of samples allowed above the answer; the answer is the sample of rank
     // `n - 1 - allowed` in ascending order.
     let allowed = ((n as f64) * fraction).floor() as usize;
     let rank = n - 1 - allowed.min(n - 1);
-
-    // Positive finite f32 order like their bit patterns; the top 16 bits make 32768 bins
-    // (sign clear), each spanning a relative width of 1/128.
-    const BINS: usize = 1 << 15;
-    let bin = |v: f32| (v.to_bits() >> 16) as usize;
-    let histogram = |range: std::ops::Range<usize>| {
-        let mut h = vec![0u32; BINS];
-        for i in range {
-            h[bin(clean(value(i)))] += 1;
-        }
-        h
+    let bits = |i: usize| {
+        let v = value(i);
+        // Non-finite and negative samples count as 0 (bit pattern 0).
+        if v.is_finite() && v > 0.0 { v.to_bits() } else { 0 }
     };
-    let counts = chunked_histogram(n, &histogram);
+    let high = histogram(n, |i| Some(bits(i) >> 16));
+    let (bin, rank_in_bin) = locate(&high, rank);
+    let low = histogram(n, |i| {
+        let b = bits(i);
+        (b >> 16 == bin).then_some(b & 0xffff)
+    });
+    let (low_bits, _) = locate(&low, rank_in_bin);
+    f32::from_bits((bin << 16) | low_bits)
+}
+
+/// The bin holding the sample of `rank` (0-based, ascending) and its rank within the bin.
+fn locate(counts: &[u64], rank: usize) -> (u32, usize) {
     let mut seen = 0usize;
-    let mut target = 0;
     for (b, &c) in counts.iter().enumerate() {
         if seen + c as usize > rank {
-            target = b;
-            break;
+            return (b as u32, rank - seen);
         }
         seen += c as usize;
     }
-    let mut inside: Vec<f32> = (0..n)
-        .map(|i| clean(value(i)))
-        .filter(|&v| bin(v) == target)
-        .collect();
-    let k = rank - seen;
-    let (_, v, _) = inside.select_nth_unstable_by(k, f32::total_cmp);
-    *v
+    unreachable!("rank {rank} beyond the {seen} samples counted")
 }
 
-#[cfg(feature = "rayon")]
-fn chunked_histogram(n: usize, histogram: &(dyn Fn(std::ops::Range<usize>) -> Vec<u32> + Sync)) -> Vec<u64> {
-    use rayon::prelude::*;
-    const CHUNK: usize = 1 << 18;
+/// Counts of `key(i)` over `0..n` in 65536 bins (`None` is not counted), in parallel chunks.
+fn histogram(n: usize, key: impl Fn(usize) -> Option<u32> + Sync) -> Vec<u64> {
+    const BINS: usize = 1 << 16;
+    let count = |range: std::ops::Range<usize>| {
+        let mut h = vec![0u32; BINS];
+        for i in range {
+            if let Some(k) = key(i) {
+                h[k as usize & (BINS - 1)] += 1;
+            }
+        }
+        h
+    };
+    let add = |mut acc: Vec<u64>, h: Vec<u32>| {
+        acc.iter_mut().zip(h).for_each(|(a, b)| *a += u64::from(b));
+        acc
+    };
+    // Chunks of at most 2^31 samples so the u32 counters cannot overflow.
+    const CHUNK: usize = 1 << 20;
     let chunks = n.div_ceil(CHUNK);
-    (0..chunks)
-        .into_par_iter()
-        .map(|c| histogram(c * CHUNK..((c + 1) * CHUNK).min(n)))
-        .fold(
-            || vec![0u64; 1 << 15],
-            |mut acc, h| {
-                acc.iter_mut().zip(h).for_each(|(a, b)| *a += b as u64);
-                acc
-            },
-        )
-        .reduce(
-            || vec![0u64; 1 << 15],
-            |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                a
-            },
-        )
-}
-
-#[cfg(not(feature = "rayon"))]
-fn chunked_histogram(n: usize, histogram: &dyn Fn(std::ops::Range<usize>) -> Vec<u32>) -> Vec<u64> {
-    histogram(0..n).into_iter().map(u64::from).collect()
+    let range = move |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        (0..chunks)
+            .into_par_iter()
+            .map(|c| count(range(c)))
+            .fold(|| vec![0u64; BINS], add)
+            .reduce(
+                || vec![0u64; BINS],
+                |mut a, b| {
+                    a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                    a
+                },
+            )
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        (0..chunks).map(|c| count(range(c))).fold(vec![0u64; BINS], add)
+    }
 }
 
 #[cfg(test)]

@@ -1,1 +1,514 @@
-//! TODO
+//! The whole steady-state operator: an HDR image and viewing conditions in, the display
+//! image and a report of everything the model used out.
+//!
+//! Ferwerda et al. 1996, Sec. 4, in this order:
+//!
+//! 1. adaptation luminances (Sec. 4.4, [`adaptation`](crate::adaptation)): the world
+//!    observer's cones adapt to half the highest visible photopic luminance, the rods to
+//!    half the highest visible scotopic luminance; the display observer to half `L_dmax`;
+//! 2. scale factors (Eq. 1–3, [`scale`](crate::scale)): `m_p` for the cone image,
+//!    `m_s` for the rod image;
+//! 3. the mesopic rod weight `k` (Eq. 6, [`mesopic`](crate::mesopic));
+//! 4. per pixel, the display colour `m_p·XYZ + k·m_s·V·white` (Eq. 6: the cone image keeps
+//!    its chromaticity, "the chromatic channels follow the same mapping"; the rod image is
+//!    grey, the display white), converted to linear sRGB relative to `L_dmax`;
+//! 5. the acuity Gaussian (Eq. 7, [`acuity`](crate::acuity)), a separate stage on the
+//!    linear display planes. Because the mapping of step 4 is affine with coefficients
+//!    shared by all pixels, blurring its output equals mapping the blurred scene;
+//! 6. clipping to what the display can show (see [`apply`]).
+//!
+//! There is no renormalisation: the output is absolute, 1.0 = `L_dmax` cd/m², so a dim
+//! scene stays dim. The mapping is linear in the scene (Eq. 1), so the display value of the
+//! world adaptation luminance is `m_p·L_wa` (+ rods) whatever the image.
+//!
+//! The split into [`plan`] (global quantities, the [`Report`]) and [`apply`] (per-pixel
+//! work with a given [`Mapping`]) lets a caller drive the mapping itself, e.g. from a
+//! time-varying adaptation state.
+
+use crate::acuity::{self, AcuityFilter};
+use crate::adaptation::{
+    highest_visible, highest_visible_by, ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2,
+    DEFAULT_HOT_PIXEL_FRACTION,
+};
+use crate::colour::xyz_to_linear_srgb_matrix;
+use crate::mesopic::rod_weight;
+use crate::scale::{photopic_scale, scotopic_scale};
+use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
+use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
+use crate::{DisplayImage, Error, HdrImage, Result, View};
+
+/// Horizontal field of view assumed when neither the caller nor the file gives one: 60°,
+/// a common rendering camera (a project choice, reported as such).
+pub const DEFAULT_FOV_DEG: f64 = 60.0;
+
+/// Blur smaller than this (pixels) is skipped: its response at the Nyquist frequency,
+/// `exp(−2π²σ²/4)`, stays above 0.99 (a project choice).
+pub const MIN_BLUR_SIGMA_PX: f64 = 0.045;
+
+/// How the scene is viewed and displayed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewingConditions {
+    /// Display maximum luminance `L_dmax`, cd/m² (default 80, paper Sec. 4.4).
+    pub display_max_cd_m2: f64,
+    /// Display adaptation `L_da`, cd/m²; `None` for `L_dmax/2` (paper Sec. 4.4).
+    pub display_adaptation_cd_m2: Option<f64>,
+    /// World (cone) adaptation `L_wa`, cd/m²; `None` for half the highest visible
+    /// photopic luminance (paper Sec. 4.4).
+    pub world_adaptation_cd_m2: Option<f64>,
+    /// World rod adaptation, scotopic cd/m²; `None` for half the highest visible scotopic
+    /// luminance, or, when only `world_adaptation_cd_m2` is given, that value times the
+    /// image's scotopic/photopic ratio of highest visible luminances.
+    pub world_adaptation_scotopic_cd_m2: Option<f64>,
+    /// Fraction of pixels allowed above the "highest visible" luminance
+    /// (default [`DEFAULT_HOT_PIXEL_FRACTION`]).
+    pub hot_pixel_fraction: f64,
+    /// Apply the acuity blur (Eq. 7).
+    pub acuity: bool,
+    /// The view, overriding the file's; `None` to use the file's or a
+    /// [`DEFAULT_FOV_DEG`] perspective view.
+    pub view: Option<View>,
+}
+
+impl Default for ViewingConditions {
+    fn default() -> Self {
+        ViewingConditions {
+            display_max_cd_m2: DEFAULT_DISPLAY_MAX_CD_M2,
+            display_adaptation_cd_m2: None,
+            world_adaptation_cd_m2: None,
+            world_adaptation_scotopic_cd_m2: None,
+            hot_pixel_fraction: DEFAULT_HOT_PIXEL_FRACTION,
+            acuity: true,
+            view: None,
+        }
+    }
+}
+
+impl ViewingConditions {
+    /// Check every parameter's domain.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |name, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::invalid(name, v, "must be a positive, finite number"))
+            }
+        };
+        positive("display-max", self.display_max_cd_m2)?;
+        if let Some(v) = self.display_adaptation_cd_m2 {
+            positive("display-adaptation", v)?;
+        }
+        if let Some(v) = self.world_adaptation_cd_m2 {
+            positive("world-adaptation", v)?;
+        }
+        if let Some(v) = self.world_adaptation_scotopic_cd_m2 {
+            positive("scotopic-adaptation", v)?;
+        }
+        if !(0.0..1.0).contains(&self.hot_pixel_fraction) {
+            return Err(Error::invalid(
+                "hot-pixel-fraction",
+                self.hot_pixel_fraction,
+                "must be in [0, 1)",
+            ));
+        }
+        if let Some(v) = &self.view
+            && !(v.horizontal_deg.is_finite() && v.horizontal_deg > 0.0 && v.horizontal_deg <= 360.0)
+        {
+            return Err(Error::invalid("fov", v.horizontal_deg, "must be in (0, 360] degrees"));
+        }
+        Ok(())
+    }
+}
+
+/// Where a value the operator used came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// Given by the caller.
+    Caller,
+    /// Read from the image file.
+    File,
+    /// Computed by the model from the image.
+    Image,
+    /// The library default.
+    Default,
+}
+
+/// The linear mapping from world to display, everything [`apply`] needs.
+///
+/// `display = photopic_scale·XYZ + photopic_offset + rod_weight·(scotopic_scale·V +
+/// scotopic_offset)·white`, in cd/m², then divided by `display_max_cd_m2`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mapping {
+    /// `m_p` (Eq. 3 with Eq. 4), display cd/m² per world cd/m².
+    pub photopic_scale: f64,
+    /// `m_s` (Eq. 3 with Eq. 5 world, Eq. 4 display), display cd/m² per scotopic cd/m².
+    pub scotopic_scale: f64,
+    /// `k` (Eq. 6).
+    pub rod_weight: f64,
+    /// Eq. 8 offset `b` of the cone image, display cd/m² (0 in steady state).
+    pub photopic_offset_cd_m2: f64,
+    /// Eq. 8 offset `b` of the rod image, display cd/m² (0 in steady state).
+    pub scotopic_offset_cd_m2: f64,
+    /// `L_dmax`, cd/m².
+    pub display_max_cd_m2: f64,
+    /// Standard deviation of the acuity Gaussian in pixels; 0 for no blur.
+    pub blur_sigma_px: f64,
+}
+
+/// Everything the operator used, with units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Report {
+    /// Width of the image, pixels.
+    pub width: usize,
+    /// Height of the image, pixels.
+    pub height: usize,
+    /// Highest visible photopic luminance, cd/m² (the quantile of Sec. 4.4).
+    pub highest_visible_cd_m2: f64,
+    /// Highest visible scotopic luminance, scotopic cd/m².
+    pub highest_visible_scotopic_cd_m2: f64,
+    /// Whether the scotopic luminance came from the file or the XYZ estimate.
+    pub scotopic_source: Source,
+    /// World (cone) adaptation `L_wa`, cd/m².
+    pub world_adaptation_cd_m2: f64,
+    /// Where `world_adaptation_cd_m2` came from.
+    pub world_adaptation_source: Source,
+    /// World rod adaptation, scotopic cd/m².
+    pub world_adaptation_scotopic_cd_m2: f64,
+    /// Display adaptation `L_da`, cd/m².
+    pub display_adaptation_cd_m2: f64,
+    /// Cone threshold at the world adaptation (Eq. 4), cd/m².
+    pub cone_threshold_cd_m2: f64,
+    /// Rod threshold at the world rod adaptation (Eq. 5), scotopic cd/m².
+    pub rod_threshold_scotopic_cd_m2: f64,
+    /// The mapping applied.
+    pub mapping: Mapping,
+    /// The acuity filter of Eq. 7 at the world adaptation (computed even if not applied).
+    pub acuity: AcuityFilter,
+    /// Whether the acuity blur was requested.
+    pub acuity_applied: bool,
+    /// The view used to turn degrees into pixels.
+    pub view: View,
+    /// Where the view came from.
+    pub view_source: Source,
+    /// Pixels per degree at the image centre; `None` for a view without angles.
+    pub pixels_per_degree: Option<f64>,
+}
+
+impl Report {
+    /// The acuity as a Snellen fraction, e.g. "20/40".
+    pub fn snellen(&self) -> String {
+        acuity::snellen(self.acuity.cutoff_cycles_per_degree)
+    }
+}
+
+/// Counts of pixels that needed a rule applied.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PixelStats {
+    /// Pixels with a NaN or infinite channel: shown black.
+    pub non_finite: usize,
+    /// Pixels with a negative channel (and otherwise finite): negative channels read as 0.
+    pub negative: usize,
+    /// Pixels brighter than the display can show, scaled down (see [`apply`]).
+    pub clipped: usize,
+}
+
+/// The operator's result.
+#[derive(Debug, Clone)]
+pub struct Output {
+    /// The display image.
+    pub image: DisplayImage,
+    /// What the model used.
+    pub report: Report,
+    /// Pixels that needed a rule applied.
+    pub stats: PixelStats,
+}
+
+/// Run the whole operator: [`plan`], then [`apply`].
+///
+/// ```
+/// use visadapt::{HdrImage, operator::{map, ViewingConditions}};
+/// // A grey scene with a white patch at 0.1 cd/m²: a moonlit room.
+/// let mut scene = HdrImage::zeros(64, 64);
+/// for i in 0..scene.len() {
+///     let l = if i % 64 < 32 { 0.1 } else { 0.02 };
+///     scene.x[i] = 0.9505 * l; scene.y[i] = l; scene.z[i] = 1.089 * l;
+/// }
+/// let out = map(&scene, &ViewingConditions::default())?;
+/// assert!((out.report.world_adaptation_cd_m2 - 0.05).abs() < 1e-6);
+/// assert!(out.report.mapping.rod_weight > 0.9); // rods dominate
+/// assert!(out.image.g[0] < 0.5);                // and the display shows a dim scene
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn map(image: &HdrImage, conditions: &ViewingConditions) -> Result<Output> {
+    let report = plan(image, conditions)?;
+    let (display, stats) = apply(image, &report.mapping);
+    Ok(Output {
+        image: display,
+        report,
+        stats,
+    })
+}
+
+/// Compute the global quantities of the model for an image: adaptation levels, scale
+/// factors, `k`, acuity and blur size.
+pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> {
+    image.check_consistent()?;
+    conditions.validate()?;
+    let fraction = conditions.hot_pixel_fraction;
+    let hv = highest_visible(&image.y, fraction) as f64;
+    let (hv_s, scotopic_source) = match &image.scotopic {
+        Some(s) => (highest_visible(s, fraction) as f64, Source::File),
+        None => {
+            let v = |i: usize| scotopic::from_xyz(image.x[i], image.y[i], image.z[i]);
+            (highest_visible_by(image.len(), v, fraction) as f64, Source::Image)
+        }
+    };
+    let (lwa, lwa_source) = match conditions.world_adaptation_cd_m2 {
+        Some(l) => (l, Source::Caller),
+        None => (ADAPTATION_FRACTION * hv, Source::Image),
+    };
+    let lwa_s = match (conditions.world_adaptation_scotopic_cd_m2, conditions.world_adaptation_cd_m2) {
+        (Some(s), _) => s,
+        (None, Some(l)) => {
+            let ratio = if hv > 0.0 && hv_s > 0.0 { hv_s / hv } else { EQUAL_ENERGY_SP_RATIO };
+            l * ratio
+        }
+        (None, None) => ADAPTATION_FRACTION * hv_s,
+    };
+    let lda = conditions
+        .display_adaptation_cd_m2
+        .unwrap_or(ADAPTATION_FRACTION * conditions.display_max_cd_m2);
+
+    let (view, view_source) = match (&conditions.view, &image.view) {
+        (Some(v), _) => (*v, Source::Caller),
+        (None, Some(v)) => (*v, Source::File),
+        (None, None) => (
+            View::perspective(DEFAULT_FOV_DEG, image.width, image.height),
+            Source::Default,
+        ),
+    };
+    let ppd = view.pixels_per_degree(image.width);
+    let acuity = AcuityFilter::new(lwa, lwa_s);
+    let blur_sigma_px = match (conditions.acuity, ppd) {
+        (true, Some(ppd)) => {
+            // The Gaussian cannot usefully be wider than the image itself.
+            let s = (acuity.sigma_deg * ppd).min(image.width.max(image.height) as f64);
+            if s >= MIN_BLUR_SIGMA_PX { s } else { 0.0 }
+        }
+        _ => 0.0,
+    };
+    Ok(Report {
+        width: image.width,
+        height: image.height,
+        highest_visible_cd_m2: hv,
+        highest_visible_scotopic_cd_m2: hv_s,
+        scotopic_source,
+        world_adaptation_cd_m2: lwa,
+        world_adaptation_source: lwa_source,
+        world_adaptation_scotopic_cd_m2: lwa_s,
+        display_adaptation_cd_m2: lda,
+        cone_threshold_cd_m2: cone_threshold_cd_m2(lwa),
+        rod_threshold_scotopic_cd_m2: rod_threshold_scotopic_cd_m2(lwa_s),
+        mapping: Mapping {
+            photopic_scale: photopic_scale(lwa, lda),
+            scotopic_scale: scotopic_scale(lwa_s, lda),
+            rod_weight: rod_weight(lwa_s),
+            photopic_offset_cd_m2: 0.0,
+            scotopic_offset_cd_m2: 0.0,
+            display_max_cd_m2: conditions.display_max_cd_m2,
+            blur_sigma_px,
+        },
+        acuity,
+        acuity_applied: conditions.acuity,
+        view,
+        view_source,
+        pixels_per_degree: ppd,
+    })
+}
+
+/// Per-pixel coefficients of the mapping, display-relative.
+#[derive(Clone, Copy)]
+struct Coefficients {
+    /// Rows: linear sRGB from XYZ, times `m_p / L_dmax`.
+    cone: [[f32; 3]; 3],
+    /// `k·m_s / L_dmax`, added equally to R, G, B (grey of the display white).
+    rod: f32,
+    /// `(b_p + k·b_s) / L_dmax`, added equally to R, G, B.
+    offset: f32,
+}
+
+impl Coefficients {
+    fn new(m: &Mapping) -> Self {
+        let xyz2rgb = xyz_to_linear_srgb_matrix();
+        let s = m.photopic_scale / m.display_max_cd_m2;
+        let cone = xyz2rgb.map(|row| row.map(|v| (v * s) as f32));
+        Coefficients {
+            cone,
+            rod: (m.rod_weight * m.scotopic_scale / m.display_max_cd_m2) as f32,
+            offset: ((m.photopic_offset_cd_m2 + m.rod_weight * m.scotopic_offset_cd_m2)
+                / m.display_max_cd_m2) as f32,
+        }
+    }
+}
+
+/// Apply a [`Mapping`] to an image.
+///
+/// Rules, in order:
+/// * a pixel with a NaN or infinite channel is black; negative channels read as 0
+///   (both counted in [`PixelStats`]);
+/// * the scotopic luminance is the file's channel, or [`scotopic::from_xyz`];
+/// * Eq. 6 in display space, then the acuity blur on the linear planes;
+/// * clipping: negative linear sRGB components (colours outside the sRGB gamut) become 0;
+///   then a pixel whose largest component exceeds 1 (`L_dmax`) is divided by that
+///   component, which keeps its chromaticity and shows it as the brightest colour of that
+///   chromaticity the display has (counted as clipped).
+///
+/// # Panics
+/// If the image's planes are inconsistent (check with [`HdrImage::check_consistent`];
+/// [`map`] and [`plan`] do).
+pub fn apply(image: &HdrImage, mapping: &Mapping) -> (DisplayImage, PixelStats) {
+    let mut out = DisplayImage {
+        width: 0,
+        height: 0,
+        r: Vec::new(),
+        g: Vec::new(),
+        b: Vec::new(),
+        display_max_cd_m2: 0.0,
+    };
+    let stats = apply_into(image, mapping, &mut out);
+    (out, stats)
+}
+
+/// [`apply`] writing into an existing display image, reusing its memory (for video:
+/// no allocation per frame once the buffers have the right size).
+pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -> PixelStats {
+    let n = image.len();
+    let c = Coefficients::new(mapping);
+    out.width = image.width;
+    out.height = image.height;
+    out.display_max_cd_m2 = mapping.display_max_cd_m2 as f32;
+    for plane in [&mut out.r, &mut out.g, &mut out.b] {
+        plane.resize(n, 0.0);
+    }
+    let DisplayImage { r, g, b, .. } = out;
+    let mut stats = par_chunks(r, g, b, |start, r, g, b| map_chunk(image, &c, start, r, g, b));
+    if mapping.blur_sigma_px > 0.0 {
+        tmp_blur(
+            &mut [r.as_mut_slice(), g.as_mut_slice(), b.as_mut_slice()],
+            image.width,
+            image.height,
+            mapping.blur_sigma_px as f32,
+        );
+    }
+    stats.clipped = par_chunks(r, g, b, |_, r, g, b| clip_chunk(r, g, b)).clipped;
+    stats
+}
+
+/// Samples per parallel work item.
+const CHUNK: usize = 1 << 15;
+
+fn par_chunks(
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+    f: impl Fn(usize, &mut [f32], &mut [f32], &mut [f32]) -> PixelStats + Sync,
+) -> PixelStats {
+    let add = |a: PixelStats, b: PixelStats| PixelStats {
+        non_finite: a.non_finite + b.non_finite,
+        negative: a.negative + b.negative,
+        clipped: a.clipped + b.clipped,
+    };
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        r.par_chunks_mut(CHUNK)
+            .zip(g.par_chunks_mut(CHUNK))
+            .zip(b.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(i, ((r, g), b))| f(i * CHUNK, r, g, b))
+            .reduce(PixelStats::default, add)
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        r.chunks_mut(CHUNK)
+            .zip(g.chunks_mut(CHUNK))
+            .zip(b.chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(i, ((r, g), b))| f(i * CHUNK, r, g, b))
+            .fold(PixelStats::default(), add)
+    }
+}
+
+fn map_chunk(
+    image: &HdrImage,
+    c: &Coefficients,
+    start: usize,
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+) -> PixelStats {
+    let end = start + r.len();
+    let (xs, ys, zs) = (&image.x[start..end], &image.y[start..end], &image.z[start..end]);
+    let mut stats = PixelStats::default();
+    // Two copies of one branch-free loop (file scotopic channel, or the XYZ estimate), so
+    // that the compiler vectorises each.
+    match &image.scotopic {
+        Some(s) => {
+            let ss = &s[start..end];
+            for (i, (((x, y), z), s)) in xs.iter().zip(ys).zip(zs).zip(ss).enumerate() {
+                let (finite, negative, [x, y, z, s]) = sanitize([*x, *y, *z, *s]);
+                stats.non_finite += usize::from(!finite);
+                stats.negative += usize::from(negative);
+                (r[i], g[i], b[i]) = c.pixel(x, y, z, s);
+            }
+        }
+        None => {
+            for (i, ((x, y), z)) in xs.iter().zip(ys).zip(zs).enumerate() {
+                let (finite, negative, [x, y, z, _]) = sanitize([*x, *y, *z, 0.0]);
+                stats.non_finite += usize::from(!finite);
+                stats.negative += usize::from(negative);
+                (r[i], g[i], b[i]) = c.pixel(x, y, z, scotopic::from_xyz(x, y, z));
+            }
+        }
+    }
+    stats
+}
+
+/// The bad-pixel rule: a pixel with any non-finite channel is black; negative channels
+/// read as 0. Returns (all finite, any negative, cleaned channels).
+#[inline(always)]
+fn sanitize(v: [f32; 4]) -> (bool, bool, [f32; 4]) {
+    let finite = v.iter().all(|c| c.is_finite());
+    let negative = finite & v.iter().any(|&c| c < 0.0);
+    (finite, negative, v.map(|c| if finite { c.max(0.0) } else { 0.0 }))
+}
+
+impl Coefficients {
+    /// Eq. 6 in linear display RGB for one pixel.
+    #[inline(always)]
+    fn pixel(&self, x: f32, y: f32, z: f32, scotopic: f32) -> (f32, f32, f32) {
+        let grey = self.rod * scotopic + self.offset;
+        let m = &self.cone;
+        (
+            m[0][0] * x + m[0][1] * y + m[0][2] * z + grey,
+            m[1][0] * x + m[1][1] * y + m[1][2] * z + grey,
+            m[2][0] * x + m[2][1] * y + m[2][2] * z + grey,
+        )
+    }
+}
+
+fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelStats {
+    let mut clipped = 0;
+    for ((r, g), b) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
+        let (rr, gg, bb) = (r.max(0.0), g.max(0.0), b.max(0.0));
+        let m = rr.max(gg).max(bb);
+        let over = m > 1.0;
+        clipped += usize::from(over);
+        let scale = if over { 1.0 / m } else { 1.0 };
+        (*r, *g, *b) = (rr * scale, gg * scale, bb * scale);
+    }
+    PixelStats {
+        clipped,
+        ..PixelStats::default()
+    }
+}
+fn tmp_blur(_: &mut [&mut [f32]], _: usize, _: usize, _: f32) {}

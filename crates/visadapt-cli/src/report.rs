@@ -1,0 +1,166 @@
+//! Text and JSON renderings of what the model used.
+
+use serde_json::{json, Value};
+use visadapt::observer::Observer;
+use visadapt::operator::{PixelStats, Report, Source};
+use visadapt::Projection;
+
+/// The `observer` JSON object (keys documented in the README).
+pub fn observer_json(o: &Observer) -> Value {
+    json!({
+        "adaptation_cd_m2": o.adaptation_cd_m2,
+        "scotopic_adaptation_cd_m2": o.scotopic_adaptation_cd_m2,
+        "display_max_cd_m2": o.display_max_cd_m2,
+        "display_adaptation_cd_m2": o.display_adaptation_cd_m2,
+        "cone_threshold_cd_m2": o.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": o.rod_threshold_scotopic_cd_m2,
+        "photopic_scale": o.photopic_scale,
+        "scotopic_scale": o.scotopic_scale,
+        "rod_weight": o.rod_weight,
+        "acuity_cycles_per_degree": o.acuity_cycles_per_degree(),
+        "snellen": o.snellen(),
+        "threshold_contrast": o.acuity.threshold_contrast,
+        "acuity_blur_sigma_deg": o.acuity.sigma_deg,
+        "acuity_fallback": o.acuity.fallback,
+    })
+}
+
+pub fn observer_text(o: &Observer) -> String {
+    format!(
+        "observer adapted to {:.4e} cd/m² ({:.4e} scotopic cd/m²), display {} cd/m² (adapted to {})\n\
+         cone threshold (Eq. 4)        {:.4e} cd/m²\n\
+         rod threshold (Eq. 5)         {:.4e} scotopic cd/m²\n\
+         photopic scale m_p (Eq. 3)    {:.4e}\n\
+         scotopic scale m_s (Eq. 3)    {:.4e}\n\
+         rod weight k (Eq. 6)          {:.4}\n\
+         acuity (Fig. 7)               {:.2} cycles/degree ({})\n\
+         acuity blur (Eq. 7)           sigma {:.4} deg, threshold contrast {:.4}{}\n",
+        o.adaptation_cd_m2,
+        o.scotopic_adaptation_cd_m2,
+        o.display_max_cd_m2,
+        o.display_adaptation_cd_m2,
+        o.cone_threshold_cd_m2,
+        o.rod_threshold_scotopic_cd_m2,
+        o.photopic_scale,
+        o.scotopic_scale,
+        o.rod_weight,
+        o.acuity_cycles_per_degree(),
+        o.snellen(),
+        o.acuity.sigma_deg,
+        o.acuity.threshold_contrast,
+        if o.acuity.fallback { " (below the rod Weber range: held at 0.403)" } else { "" },
+    )
+}
+
+fn source(s: Source) -> &'static str {
+    match s {
+        Source::Caller => "given",
+        Source::File => "from the file",
+        Source::Image => "from the image",
+        Source::Default => "default",
+    }
+}
+
+fn projection(p: Projection) -> &'static str {
+    match p {
+        Projection::Perspective => "perspective",
+        Projection::AngularFisheye => "angular fisheye",
+        Projection::HemisphericalFisheye => "hemispherical fisheye",
+        Projection::Cylindrical => "cylindrical",
+        Projection::Planisphere => "planisphere",
+        Projection::Parallel => "parallel",
+    }
+}
+
+/// The `map` report as JSON.
+pub fn map_json(r: &Report, stats: &PixelStats, scale_applied: f64) -> Value {
+    let m = &r.mapping;
+    json!({
+        "width": r.width,
+        "height": r.height,
+        "input_scale": scale_applied,
+        "highest_visible_cd_m2": r.highest_visible_cd_m2,
+        "highest_visible_scotopic_cd_m2": r.highest_visible_scotopic_cd_m2,
+        "scotopic_source": source(r.scotopic_source),
+        "adaptation_cd_m2": r.world_adaptation_cd_m2,
+        "adaptation_source": source(r.world_adaptation_source),
+        "scotopic_adaptation_cd_m2": r.world_adaptation_scotopic_cd_m2,
+        "display_adaptation_cd_m2": r.display_adaptation_cd_m2,
+        "display_max_cd_m2": m.display_max_cd_m2,
+        "cone_threshold_cd_m2": r.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": r.rod_threshold_scotopic_cd_m2,
+        "photopic_scale": m.photopic_scale,
+        "scotopic_scale": m.scotopic_scale,
+        "rod_weight": m.rod_weight,
+        "acuity_cycles_per_degree": r.acuity.cutoff_cycles_per_degree,
+        "snellen": r.snellen(),
+        "threshold_contrast": r.acuity.threshold_contrast,
+        "acuity_fallback": r.acuity.fallback,
+        "acuity_blur_sigma_deg": r.acuity.sigma_deg,
+        "acuity_applied": r.acuity_applied,
+        "blur_sigma_px": m.blur_sigma_px,
+        "pixels_per_degree": r.pixels_per_degree,
+        "view": {
+            "projection": projection(r.view.projection),
+            "horizontal_fov_deg": r.view.horizontal_deg,
+            "source": source(r.view_source),
+        },
+        "pixels_non_finite": stats.non_finite,
+        "pixels_negative": stats.negative,
+        "pixels_clipped": stats.clipped,
+    })
+}
+
+pub fn map_text(r: &Report, stats: &PixelStats) -> String {
+    let m = &r.mapping;
+    let ppd = r
+        .pixels_per_degree
+        .map_or("n/a".to_string(), |p| format!("{p:.2}"));
+    let blur = if !r.acuity_applied {
+        "off (--no-acuity)".to_string()
+    } else if m.blur_sigma_px > 0.0 {
+        format!("sigma {:.3} px ({:.4} deg)", m.blur_sigma_px, r.acuity.sigma_deg)
+    } else {
+        format!("none (sigma {:.4} deg is below half a pixel's worth)", r.acuity.sigma_deg)
+    };
+    format!(
+        "image                         {}x{}\n\
+         highest visible luminance     {:.4e} cd/m², {:.4e} scotopic cd/m² (scotopic {})\n\
+         world adaptation (Sec. 4.4)   {:.4e} cd/m² ({}), {:.4e} scotopic cd/m²\n\
+         display                       max {} cd/m², adaptation {} cd/m²\n\
+         thresholds (Eq. 4, 5)         cones {:.4e} cd/m², rods {:.4e} scotopic cd/m²\n\
+         scale factors (Eq. 3)         m_p {:.4e}, m_s {:.4e}\n\
+         rod weight k (Eq. 6)          {:.4}\n\
+         acuity (Fig. 7, Eq. 7)        {:.2} cycles/degree ({}), threshold contrast {:.4}{}\n\
+         view                          {} {:.1} deg ({}), {} pixels/degree\n\
+         acuity blur                   {}\n",
+        r.width,
+        r.height,
+        r.highest_visible_cd_m2,
+        r.highest_visible_scotopic_cd_m2,
+        source(r.scotopic_source),
+        r.world_adaptation_cd_m2,
+        source(r.world_adaptation_source),
+        r.world_adaptation_scotopic_cd_m2,
+        m.display_max_cd_m2,
+        r.display_adaptation_cd_m2,
+        r.cone_threshold_cd_m2,
+        r.rod_threshold_scotopic_cd_m2,
+        m.photopic_scale,
+        m.scotopic_scale,
+        m.rod_weight,
+        r.acuity.cutoff_cycles_per_degree,
+        r.snellen(),
+        r.acuity.threshold_contrast,
+        if r.acuity.fallback { " (fallback below the rod Weber range)" } else { "" },
+        projection(r.view.projection),
+        r.view.horizontal_deg,
+        source(r.view_source),
+        ppd,
+        blur,
+    ) + &if stats.clipped > 0 {
+        format!("clipped                       {} pixels above the display maximum\n", stats.clipped)
+    } else {
+        String::new()
+    }
+}

@@ -1,0 +1,237 @@
+//! The command line, end to end: outputs, reports, and bad input.
+
+use assert_cmd::Command;
+use predicates::prelude::*;
+use std::path::{Path, PathBuf};
+
+fn visadapt() -> Command {
+    Command::cargo_bin("visadapt").unwrap()
+}
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../visadapt/tests/data").join(name)
+}
+
+/// Eq. 4, written out independently of the library.
+fn tp(l: f64) -> f64 {
+    let x = l.log10();
+    10f64.powf(if x <= -2.6 {
+        -0.72
+    } else if x >= 1.9 {
+        x - 1.255
+    } else {
+        (0.249 * x + 0.65).powf(2.7) - 0.72
+    })
+}
+
+fn json(out: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(out).expect("stdout is one JSON value")
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+fn one_line_error(stderr: &[u8]) -> String {
+    let s = String::from_utf8_lossy(stderr).into_owned();
+    assert_eq!(s.trim_end().lines().count(), 1, "not one line: {s:?}");
+    assert!(!s.contains("panicked"), "{s}");
+    s
+}
+
+#[test]
+fn observer_json_has_the_documented_keys_and_values() {
+    let out = visadapt().args(["observer", "0.001", "--json"]).output().unwrap();
+    assert!(out.status.success());
+    let v = json(&out.stdout);
+    for key in [
+        "adaptation_cd_m2",
+        "scotopic_adaptation_cd_m2",
+        "display_adaptation_cd_m2",
+        "cone_threshold_cd_m2",
+        "rod_threshold_scotopic_cd_m2",
+        "photopic_scale",
+        "scotopic_scale",
+        "rod_weight",
+        "acuity_cycles_per_degree",
+        "snellen",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(v["adaptation_cd_m2"], 0.001);
+    assert!((v["scotopic_adaptation_cd_m2"].as_f64().unwrap() - 0.002261).abs() < 1e-9);
+    assert_eq!(v["display_adaptation_cd_m2"], 40.0);
+    let mp = tp(40.0) / tp(0.001);
+    assert!((v["photopic_scale"].as_f64().unwrap() / mp - 1.0).abs() < 1e-9);
+    assert_eq!(v["rod_weight"], 1.0);
+    // Ward Larson 1997 Eq. 15 at 1e-3 cd/m²: 17.25·atan(1.4·(−3) + 0.35) + 25.72 = 3.01.
+    assert!((v["acuity_cycles_per_degree"].as_f64().unwrap() - 3.01).abs() < 0.01);
+    assert_eq!(v["snellen"], "20/200");
+}
+
+#[test]
+fn observer_rejects_impossible_luminances() {
+    for bad in ["0", "-1", "nan", "inf"] {
+        let out = visadapt().args(["observer", bad]).output().unwrap();
+        assert!(!out.status.success(), "{bad}");
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains("adaptation"), "{e}");
+    }
+    let out = visadapt().args(["observer", "abc"]).output().unwrap();
+    assert!(!out.status.success());
+}
+
+#[test]
+fn map_writes_png_and_reports() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("out.png");
+    let out = visadapt()
+        .arg("map")
+        .arg(data("mixtex.hdr"))
+        .arg("-o")
+        .arg(&png)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v = json(&out.stdout);
+    let lwa = v["adaptation_cd_m2"].as_f64().unwrap();
+    assert!((v["highest_visible_cd_m2"].as_f64().unwrap() / 2.0 - lwa).abs() < 1e-9 * lwa);
+    assert!((v["photopic_scale"].as_f64().unwrap() / (tp(40.0) / tp(lwa)) - 1.0).abs() < 1e-9);
+    for key in ["rod_weight", "acuity_cycles_per_degree", "blur_sigma_px", "scotopic_scale"] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    assert_eq!((reader.info().width, reader.info().height), (128, 72));
+    assert_eq!(reader.info().bit_depth, png::BitDepth::Eight);
+    assert_eq!(files_in(dir.path()), ["out.png"]);
+}
+
+#[test]
+fn map_other_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, extra) in [("a.png", vec!["--bits", "16"]), ("b.jpg", vec![]), ("c.exr", vec![])] {
+        let p = dir.path().join(name);
+        visadapt()
+            .arg("map")
+            .arg(data("mixtex.hdr"))
+            .arg("-o")
+            .arg(&p)
+            .args(extra)
+            .assert()
+            .success();
+        assert!(std::fs::metadata(&p).unwrap().len() > 100);
+    }
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(dir.path().join("a.png")).unwrap(),
+    ));
+    assert_eq!(decoder.read_info().unwrap().info().bit_depth, png::BitDepth::Sixteen);
+}
+
+#[test]
+fn map_text_report_names_what_it_used() {
+    let dir = tempfile::tempdir().unwrap();
+    visadapt()
+        .arg("map")
+        .arg(data("sunset-fisheye.hdr"))
+        .arg("-o")
+        .arg(dir.path().join("o.png"))
+        .args(["--peak", "0.05"])
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("world adaptation"))
+        .stdout(predicate::str::contains("2.5000e-2 cd/m²"))
+        .stdout(predicate::str::contains("angular fisheye 180.0 deg (from the file)"))
+        .stdout(predicate::str::contains("rod weight k"));
+}
+
+/// Every failure: one line naming the file, non-zero exit, no output and no temporary
+/// file left behind, and an existing output file untouched.
+#[test]
+fn bad_input_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let truncated = dir.path().join("truncated.hdr");
+    let bytes = std::fs::read(data("mixtex.hdr")).unwrap();
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    let garbage = dir.path().join("garbage.exr");
+    std::fs::write(&garbage, b"this is not an image at all").unwrap();
+    let huge = dir.path().join("huge.hdr");
+    std::fs::write(&huge, b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2000000000 +X 2000000000\n").unwrap();
+    let empty = dir.path().join("empty.pfm");
+    std::fs::write(&empty, b"").unwrap();
+    let keep = dir.path().join("keep.png");
+    std::fs::write(&keep, b"precious").unwrap();
+
+    for (input, what) in [
+        (dir.path().join("missing.hdr"), "missing.hdr"),
+        (truncated.clone(), "truncated.hdr"),
+        (garbage.clone(), "garbage.exr"),
+        (huge.clone(), "huge.hdr"),
+        (empty.clone(), "empty.pfm"),
+    ] {
+        let before = files_in(dir.path());
+        let out = visadapt().arg("map").arg(&input).arg("-o").arg(&keep).output().unwrap();
+        assert!(!out.status.success(), "{what}");
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains(what), "{e}");
+        assert_eq!(files_in(dir.path()), before, "{what}: files changed");
+        assert_eq!(std::fs::read(&keep).unwrap(), b"precious");
+    }
+    // The limit is a flag: raising it lets a large (here: truncated) file be tried.
+    let out = visadapt().arg("map").arg(&huge).arg("-o").arg(&keep).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--max-pixels"));
+}
+
+#[test]
+fn bad_arguments_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.hdr");
+    std::fs::copy(data("mixtex.hdr"), &input).unwrap();
+    let cases: [(&[&str], &str); 6] = [
+        (&["-o", "out.txt"], "output format"),
+        (&["-o", "x.png", "--scale", "-2"], "--scale"),
+        (&["-o", "x.png", "--peak", "nan"], "--peak"),
+        (&["-o", "x.png", "--display-max", "0"], "display-max"),
+        (&["-o", "x.png", "--fov", "0"], "--fov"),
+        (&["-o", "x.png", "--world-adaptation", "-3"], "world-adaptation"),
+    ];
+    for (args, what) in cases {
+        let out = visadapt()
+            .current_dir(dir.path())
+            .arg("map")
+            .arg(&input)
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?}");
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains(what), "{args:?}: {e}");
+    }
+    // Never overwrite the input, even spelled differently.
+    let out = visadapt()
+        .current_dir(dir.path())
+        .args(["map", "in.hdr", "-o", "./in.hdr"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(one_line_error(&out.stderr).contains("overwrite the input"));
+    assert_eq!(std::fs::read(&input).unwrap(), std::fs::read(data("mixtex.hdr")).unwrap());
+    assert_eq!(files_in(dir.path()), ["in.hdr"]);
+}
+
+#[test]
+fn help_has_examples() {
+    visadapt()
+        .args(["map", "--help"])
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("Examples:"))
+        .stdout(predicate::str::contains("--peak"));
+    visadapt().arg("--help").assert().success().stdout(predicate::str::contains("observer"));
+}
