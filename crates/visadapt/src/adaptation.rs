@@ -29,37 +29,44 @@ pub const ADAPTATION_FRACTION: f64 = 0.5;
 /// `(1 − fraction)` quantile, taking the next sample up). Non-finite and negative samples
 /// count as 0. Returns 0 for an empty slice. `fraction` is clamped to [0, 1].
 pub fn highest_visible(values: &[f32], fraction: f64) -> f32 {
-    highest_visible_by(values.len(), |i| values[i], fraction)
+    highest_visible_of(
+        values.len(),
+        |start, out: &mut [[f32; 1]]| {
+            for (o, v) in out.iter_mut().zip(&values[start..]) {
+                *o = [*v];
+            }
+        },
+        fraction,
+    )[0]
 }
 
-/// [`highest_visible`] of values produced by `value(i)` for `i` in `0..n` (so that derived
-/// channels, e.g. a scotopic estimate, need no buffer of their own).
+/// [`highest_visible`] of `K` channels at once (e.g. photopic and scotopic luminance),
+/// without a buffer for derived channels: `fill(start, block)` writes the values of pixels
+/// `start..start + block.len()` into `block`.
 ///
 /// Exact, in two histogram passes over the IEEE-754 bit pattern (which orders like the
 /// value for non-negative floats): the high 16 bits find the bin holding the wanted rank,
 /// the low 16 bits of the samples in that bin find the sample itself.
-pub fn highest_visible_by(n: usize, value: impl Fn(usize) -> f32 + Sync, fraction: f64) -> f32 {
+pub fn highest_visible_of<const K: usize>(
+    n: usize,
+    fill: impl Fn(usize, &mut [[f32; K]]) + Sync,
+    fraction: f64,
+) -> [f32; K] {
     if n == 0 {
-        return 0.0;
+        return [0.0; K];
     }
     let fraction = if fraction.is_nan() { 0.0 } else { fraction.clamp(0.0, 1.0) };
     // Number of samples allowed above the answer; the answer is the sample of rank
     // `n - 1 - allowed` in ascending order.
     let allowed = ((n as f64) * fraction).floor() as usize;
     let rank = n - 1 - allowed.min(n - 1);
-    let bits = |i: usize| {
-        let v = value(i);
-        // Non-finite and negative samples count as 0 (bit pattern 0).
-        if v.is_finite() && v > 0.0 { v.to_bits() } else { 0 }
-    };
-    let high = histogram(n, |i| Some(bits(i) >> 16));
-    let (bin, rank_in_bin) = locate(&high, rank);
-    let low = histogram(n, |i| {
-        let b = bits(i);
-        (b >> 16 == bin).then_some(b & 0xffff)
-    });
-    let (low_bits, _) = locate(&low, rank_in_bin);
-    f32::from_bits((bin << 16) | low_bits)
+    let high = high_histograms::<K>(n, &fill);
+    let located: [(u32, usize); K] = std::array::from_fn(|k| locate(&high[k], rank));
+    let low = low_histograms::<K>(n, &fill, located.map(|l| l.0));
+    std::array::from_fn(|k| {
+        let (low_bits, _) = locate(&low[k], located[k].1);
+        f32::from_bits((located[k].0 << 16) | low_bits)
+    })
 }
 
 /// The bin holding the sample of `rank` (0-based, ascending) and its rank within the bin.
@@ -74,44 +81,116 @@ fn locate(counts: &[u64], rank: usize) -> (u32, usize) {
     unreachable!("rank {rank} beyond the {seen} samples counted")
 }
 
-/// Counts of `key(i)` over `0..n` in 65536 bins (`None` is not counted), in parallel chunks.
-fn histogram(n: usize, key: impl Fn(usize) -> Option<u32> + Sync) -> Vec<u64> {
-    const BINS: usize = 1 << 16;
-    let count = |range: std::ops::Range<usize>| {
-        let mut h = vec![0u32; BINS];
-        for i in range {
-            if let Some(k) = key(i) {
-                h[k as usize & (BINS - 1)] += 1;
+/// Bins of each histogram (16 bits of the float).
+const BINS: usize = 1 << 16;
+/// Pixels per block handed to `fill`.
+const BLOCK: usize = 1024;
+/// Pixels per parallel work item; far below 2^32 so the u32 counters cannot overflow.
+const CHUNK: usize = 1 << 20;
+
+/// The bit pattern used for ordering: non-finite and non-positive samples count as 0.
+/// Positive finite floats are exactly the patterns 1..=0x7f7f_ffff (negative ones have the
+/// sign bit set, infinities and NaNs have an all-ones exponent), so one compare decides.
+#[inline(always)]
+fn order_bits(v: f32) -> u32 {
+    let b = v.to_bits();
+    if b.wrapping_sub(1) < 0x7f7f_ffff { b } else { 0 }
+}
+
+/// Fill `keys` with the ordering bit patterns of a block (a loop the compiler vectorises).
+#[inline(always)]
+fn block_keys<const K: usize>(block: &[[f32; K]], keys: &mut [[u32; K]]) {
+    for (k, v) in keys.iter_mut().zip(block) {
+        *k = v.map(order_bits);
+    }
+}
+
+/// Histograms of the high 16 bits of each channel.
+fn high_histograms<const K: usize>(
+    n: usize,
+    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
+) -> Vec<Vec<u64>> {
+    per_chunk::<K>(n, |range, h| {
+        let mut block = [[0.0f32; K]; BLOCK];
+        let mut keys = [[0u32; K]; BLOCK];
+        let mut start = range.start;
+        while start < range.end {
+            let len = BLOCK.min(range.end - start);
+            fill(start, &mut block[..len]);
+            block_keys(&block[..len], &mut keys[..len]);
+            for px in &keys[..len] {
+                for k in 0..K {
+                    h[k][(px[k] >> 16) as usize] += 1;
+                }
             }
+            start += len;
         }
+    })
+}
+
+/// Histograms of the low 16 bits of the samples whose high 16 bits equal `bins[k]`.
+fn low_histograms<const K: usize>(
+    n: usize,
+    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
+    bins: [u32; K],
+) -> Vec<Vec<u64>> {
+    per_chunk::<K>(n, |range, h| {
+        let mut block = [[0.0f32; K]; BLOCK];
+        let mut keys = [[0u32; K]; BLOCK];
+        let mut start = range.start;
+        while start < range.end {
+            let len = BLOCK.min(range.end - start);
+            fill(start, &mut block[..len]);
+            block_keys(&block[..len], &mut keys[..len]);
+            for px in &keys[..len] {
+                for k in 0..K {
+                    let b = px[k];
+                    if b >> 16 == bins[k] {
+                        h[k][(b & 0xffff) as usize] += 1;
+                    }
+                }
+            }
+            start += len;
+        }
+    })
+}
+
+/// Run `count` over chunks of `0..n` (in parallel with the `rayon` feature), each with
+/// its own `K` u32 histograms, and sum them.
+fn per_chunk<const K: usize>(
+    n: usize,
+    count: impl Fn(std::ops::Range<usize>, &mut [Vec<u32>]) + Sync,
+) -> Vec<Vec<u64>> {
+    let chunks = n.div_ceil(CHUNK);
+    let one = |c: usize| {
+        let mut h = vec![vec![0u32; BINS]; K];
+        count(c * CHUNK..((c + 1) * CHUNK).min(n), &mut h);
         h
     };
-    let add = |mut acc: Vec<u64>, h: Vec<u32>| {
-        acc.iter_mut().zip(h).for_each(|(a, b)| *a += u64::from(b));
+    let zero = || vec![vec![0u64; BINS]; K];
+    let add = |mut acc: Vec<Vec<u64>>, h: Vec<Vec<u32>>| {
+        for (a, h) in acc.iter_mut().zip(h) {
+            a.iter_mut().zip(h).for_each(|(a, b)| *a += u64::from(b));
+        }
         acc
     };
-    // Chunks of at most 2^31 samples so the u32 counters cannot overflow.
-    const CHUNK: usize = 1 << 20;
-    let chunks = n.div_ceil(CHUNK);
-    let range = move |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
     #[cfg(feature = "rayon")]
     {
         use rayon::prelude::*;
         (0..chunks)
             .into_par_iter()
-            .map(|c| count(range(c)))
-            .fold(|| vec![0u64; BINS], add)
-            .reduce(
-                || vec![0u64; BINS],
-                |mut a, b| {
+            .map(one)
+            .fold(zero, add)
+            .reduce(zero, |mut a, b| {
+                for (a, b) in a.iter_mut().zip(b) {
                     a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                    a
-                },
-            )
+                }
+                a
+            })
     }
     #[cfg(not(feature = "rayon"))]
     {
-        (0..chunks).map(|c| count(range(c))).fold(vec![0u64; BINS], add)
+        (0..chunks).map(one).fold(zero(), add)
     }
 }
 
@@ -151,5 +230,21 @@ mod tests {
         assert_eq!(highest_visible(&v, 0.0), 2.0);
         assert_eq!(highest_visible(&[f32::NAN; 4], 0.0), 0.0);
         assert_eq!(highest_visible(&[], 0.0), 0.0);
+    }
+
+    #[test]
+    fn channels_at_once_equal_channels_alone() {
+        let a: Vec<f32> = (0..3000).map(|i| ((i * 31) % 1000) as f32 * 0.37).collect();
+        let b: Vec<f32> = (0..3000).map(|i| 1e-3 * ((i * 17) % 977) as f32).collect();
+        let both = highest_visible_of(
+            3000,
+            |start, out: &mut [[f32; 2]]| {
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o = [a[start + i], b[start + i]];
+                }
+            },
+            0.01,
+        );
+        assert_eq!(both, [highest_visible(&a, 0.01), highest_visible(&b, 0.01)]);
     }
 }

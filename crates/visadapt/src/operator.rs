@@ -27,7 +27,7 @@
 
 use crate::acuity::{self, AcuityFilter};
 use crate::adaptation::{
-    highest_visible, highest_visible_by, ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2,
+    highest_visible_of, ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2,
     DEFAULT_HOT_PIXEL_FRACTION,
 };
 use crate::colour::xyz_to_linear_srgb_matrix;
@@ -254,12 +254,28 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
     image.check_consistent()?;
     conditions.validate()?;
     let fraction = conditions.hot_pixel_fraction;
-    let hv = highest_visible(&image.y, fraction) as f64;
-    let (hv_s, scotopic_source) = match &image.scotopic {
-        Some(s) => (highest_visible(s, fraction) as f64, Source::File),
+    let (x, y, z) = (&image.x, &image.y, &image.z);
+    let (hv, hv_s, scotopic_source) = match &image.scotopic {
+        Some(s) => {
+            let fill = |start: usize, out: &mut [[f32; 2]]| {
+                let end = start + out.len();
+                for (o, (y, s)) in out.iter_mut().zip(y[start..end].iter().zip(&s[start..end])) {
+                    *o = [*y, *s];
+                }
+            };
+            let [hv, hv_s] = highest_visible_of(image.len(), fill, fraction);
+            (hv as f64, hv_s as f64, Source::File)
+        }
         None => {
-            let v = |i: usize| scotopic::from_xyz(image.x[i], image.y[i], image.z[i]);
-            (highest_visible_by(image.len(), v, fraction) as f64, Source::Image)
+            let fill = |start: usize, out: &mut [[f32; 2]]| {
+                let end = start + out.len();
+                let xyz = x[start..end].iter().zip(&y[start..end]).zip(&z[start..end]);
+                for (o, ((x, y), z)) in out.iter_mut().zip(xyz) {
+                    *o = [*y, scotopic::from_xyz(*x, *y, *z)];
+                }
+            };
+            let [hv, hv_s] = highest_visible_of(image.len(), fill, fraction);
+            (hv as f64, hv_s as f64, Source::Image)
         }
     };
     let (lwa, lwa_source) = match conditions.world_adaptation_cd_m2 {
@@ -448,37 +464,43 @@ fn map_chunk(
 ) -> PixelStats {
     let end = start + r.len();
     let (xs, ys, zs) = (&image.x[start..end], &image.y[start..end], &image.z[start..end]);
-    let mut stats = PixelStats::default();
+    let (mut non_finite, mut negative) = (0u32, 0u32);
     // Two copies of one branch-free loop (file scotopic channel, or the XYZ estimate), so
     // that the compiler vectorises each.
+    let out = r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut());
     match &image.scotopic {
         Some(s) => {
-            let ss = &s[start..end];
-            for (i, (((x, y), z), s)) in xs.iter().zip(ys).zip(zs).zip(ss).enumerate() {
-                let (finite, negative, [x, y, z, s]) = sanitize([*x, *y, *z, *s]);
-                stats.non_finite += usize::from(!finite);
-                stats.negative += usize::from(negative);
-                (r[i], g[i], b[i]) = c.pixel(x, y, z, s);
+            let xyzs = xs.iter().zip(ys).zip(zs).zip(&s[start..end]);
+            for ((((x, y), z), s), ((r, g), b)) in xyzs.zip(out) {
+                let (finite, neg, [x, y, z, s]) = sanitize([*x, *y, *z, *s]);
+                non_finite += u32::from(!finite);
+                negative += u32::from(neg);
+                (*r, *g, *b) = c.pixel(x, y, z, s);
             }
         }
         None => {
-            for (i, ((x, y), z)) in xs.iter().zip(ys).zip(zs).enumerate() {
-                let (finite, negative, [x, y, z, _]) = sanitize([*x, *y, *z, 0.0]);
-                stats.non_finite += usize::from(!finite);
-                stats.negative += usize::from(negative);
-                (r[i], g[i], b[i]) = c.pixel(x, y, z, scotopic::from_xyz(x, y, z));
+            for (((x, y), z), ((r, g), b)) in xs.iter().zip(ys).zip(zs).zip(out) {
+                let (finite, neg, [x, y, z, _]) = sanitize([*x, *y, *z, 0.0]);
+                non_finite += u32::from(!finite);
+                negative += u32::from(neg);
+                (*r, *g, *b) = c.pixel(x, y, z, scotopic::from_xyz(x, y, z));
             }
         }
     }
-    stats
+    PixelStats {
+        non_finite: non_finite as usize,
+        negative: negative as usize,
+        clipped: 0,
+    }
 }
 
 /// The bad-pixel rule: a pixel with any non-finite channel is black; negative channels
-/// read as 0. Returns (all finite, any negative, cleaned channels).
+/// read as 0. Returns (all finite, any negative, cleaned channels). Written with
+/// non-short-circuit operators and selects so that loops over it vectorise.
 #[inline(always)]
 fn sanitize(v: [f32; 4]) -> (bool, bool, [f32; 4]) {
-    let finite = v.iter().all(|c| c.is_finite());
-    let negative = finite & v.iter().any(|&c| c < 0.0);
+    let finite = v[0].is_finite() & v[1].is_finite() & v[2].is_finite() & v[3].is_finite();
+    let negative = finite & ((v[0] < 0.0) | (v[1] < 0.0) | (v[2] < 0.0) | (v[3] < 0.0));
     (finite, negative, v.map(|c| if finite { c.max(0.0) } else { 0.0 }))
 }
 
@@ -497,17 +519,17 @@ impl Coefficients {
 }
 
 fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelStats {
-    let mut clipped = 0;
+    let mut clipped = 0u32;
     for ((r, g), b) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
         let (rr, gg, bb) = (r.max(0.0), g.max(0.0), b.max(0.0));
         let m = rr.max(gg).max(bb);
         let over = m > 1.0;
-        clipped += usize::from(over);
+        clipped += u32::from(over);
         let scale = if over { 1.0 / m } else { 1.0 };
         (*r, *g, *b) = (rr * scale, gg * scale, bb * scale);
     }
     PixelStats {
-        clipped,
+        clipped: clipped as usize,
         ..PixelStats::default()
     }
 }
