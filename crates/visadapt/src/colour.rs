@@ -43,26 +43,27 @@ pub type Mat3 = [[f64; 3]; 3];
 
 impl Chromaticities {
     /// The matrix taking linear RGB in these primaries to CIE XYZ, normalised so that
-    /// RGB = (1, 1, 1) has Y = 1 (SMPTE RP 177-1993, Sec. 3.3). `None` if the primaries
-    /// are degenerate (collinear, or a y of zero).
+    /// RGB = (1, 1, 1) has Y = 1 (SMPTE RP 177-1993, Sec. 3.3). Each primary's column is
+    /// taken as (x, y, 1 − x − y), a multiple of its XYZ, so primaries with y = 0 work too
+    /// (the CIE XYZ "primaries" red (1, 0), green (0, 1), blue (0, 0) of an EXR file whose
+    /// channels hold XYZ give the identity); only the white needs y ≠ 0. `None` if the
+    /// primaries are degenerate (collinear) or not finite.
     pub fn rgb_to_xyz(&self) -> Option<Mat3> {
-        let col = |c: Xy| -> Option<[f64; 3]> {
-            (c[1].abs() > 1e-12 && c.iter().all(|v| v.is_finite()))
-                .then(|| [c[0] / c[1], 1.0, (1.0 - c[0] - c[1]) / c[1]])
-        };
-        let (r, g, b, w) = (
-            col(self.red)?,
-            col(self.green)?,
-            col(self.blue)?,
-            col(self.white)?,
-        );
+        let col = |c: Xy| [c[0], c[1], 1.0 - c[0] - c[1]];
+        let (r, g, b) = (col(self.red), col(self.green), col(self.blue));
+        let [xw, yw] = self.white;
+        if !(yw.abs() > 1e-12 && xw.is_finite() && yw.is_finite()) {
+            return None;
+        }
+        let w = [xw / yw, 1.0, (1.0 - xw - yw) / yw];
         let p = [[r[0], g[0], b[0]], [r[1], g[1], b[1]], [r[2], g[2], b[2]]];
         let s = mul_vec(&invert(&p)?, w);
-        Some([
+        let m = [
             [p[0][0] * s[0], p[0][1] * s[1], p[0][2] * s[2]],
             [p[1][0] * s[0], p[1][1] * s[1], p[1][2] * s[2]],
             [p[2][0] * s[0], p[2][1] * s[1], p[2][2] * s[2]],
-        ])
+        ];
+        m.iter().flatten().all(|v| v.is_finite()).then_some(m)
     }
 }
 
@@ -193,6 +194,23 @@ mod tests {
         let m = RADIANCE_DEFAULT.rgb_to_xyz().unwrap();
         let w = mul_vec(&m, [1.0, 1.0, 1.0]);
         assert!((w[0] - 1.0).abs() < 1e-12 && (w[1] - 1.0).abs() < 1e-12 && (w[2] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn xyz_primaries_give_the_identity() {
+        let xyz = Chromaticities {
+            red: [1.0, 0.0],
+            green: [0.0, 1.0],
+            blue: [0.0, 0.0],
+            white: [1.0 / 3.0, 1.0 / 3.0],
+        };
+        let m = xyz.rgb_to_xyz().unwrap();
+        for (r, row) in m.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                let e = if r == c { 1.0 } else { 0.0 };
+                assert!((v - e).abs() < 1e-12, "{r},{c}: {v}");
+            }
+        }
     }
 
     #[test]

@@ -660,31 +660,7 @@ fn file_matrix(header: &Header) -> Result<Mat3> {
         None => REC709,
     };
     c.rgb_to_xyz()
-        .or_else(|| rgb_to_xyz_any(&c))
         .ok_or_else(|| invalid("degenerate chromaticities attribute"))
-}
-
-/// RGB→XYZ for primaries that [`Chromaticities::rgb_to_xyz`] refuses because a primary
-/// has y = 0, such as the CIE XYZ "primaries" red (1, 0), green (0, 1), blue (0, 0) of
-/// `XYZ.exr`. Same SMPTE RP 177 construction, with each primary's column taken as
-/// (x, y, 1 − x − y), a multiple of its XYZ, which needs no division by y; the white must
-/// still have y ≠ 0. For the XYZ primaries with white (1/3, 1/3) it is the identity.
-fn rgb_to_xyz_any(c: &Chromaticities) -> Option<Mat3> {
-    let col = |p: colour::Xy| [p[0], p[1], 1.0 - p[0] - p[1]];
-    let (r, g, b) = (col(c.red), col(c.green), col(c.blue));
-    let [xw, yw] = c.white;
-    if !(yw.abs() > 1e-12 && xw.is_finite() && yw.is_finite()) {
-        return None;
-    }
-    let w = [xw / yw, 1.0, (1.0 - xw - yw) / yw];
-    let p = [[r[0], g[0], b[0]], [r[1], g[1], b[1]], [r[2], g[2], b[2]]];
-    let s = colour::mul_vec(&colour::invert(&p)?, w);
-    let m = [
-        [p[0][0] * s[0], p[0][1] * s[1], p[0][2] * s[2]],
-        [p[1][0] * s[0], p[1][1] * s[1], p[1][2] * s[2]],
-        [p[2][0] * s[0], p[2][1] * s[1], p[2][2] * s[2]],
-    ];
-    m.iter().flatten().all(|v| v.is_finite()).then_some(m)
 }
 
 /// `v` as `f32`, saturating finite values at ±`f32::MAX` (Inf and NaN pass through).
@@ -984,38 +960,6 @@ pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn xyz_primaries_give_the_identity() {
-        let xyz = Chromaticities {
-            red: [1.0, 0.0],
-            green: [0.0, 1.0],
-            blue: [0.0, 0.0],
-            white: [1.0 / 3.0, 1.0 / 3.0],
-        };
-        assert!(
-            xyz.rgb_to_xyz().is_none(),
-            "colour::rgb_to_xyz refuses y = 0"
-        );
-        let m = rgb_to_xyz_any(&xyz).unwrap();
-        for (r, row) in m.iter().enumerate() {
-            for (c, v) in row.iter().enumerate() {
-                let e = if r == c { 1.0 } else { 0.0 };
-                assert!((v - e).abs() < 1e-12, "{r},{c}: {v}");
-            }
-        }
-    }
-
-    #[test]
-    fn general_matrix_agrees_with_colour_for_rec709() {
-        let a = REC709.rgb_to_xyz().unwrap();
-        let b = rgb_to_xyz_any(&REC709).unwrap();
-        for r in 0..3 {
-            for c in 0..3 {
-                assert!((a[r][c] - b[r][c]).abs() < 1e-12);
-            }
-        }
-    }
 
     #[test]
     fn chroma_filter_sums_to_one_and_keeps_constants() {
