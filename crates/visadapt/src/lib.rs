@@ -12,11 +12,13 @@
 //! | [`scale`] | Ward's contrast scale factor, photopic and rod operators | Eq. 1–3, Sec. 4 |
 //! | [`mesopic`] | the rod weight `k` of the mesopic combination | Eq. 6 |
 //! | [`scotopic`] | scotopic luminance from XYZ when no scotopic channel exists | Sec. 2.2, Fig. 2 |
+//! | [`spectral`] | CIE 1931, CIE 1951 V'(λ) and ColorChecker tables; spectral sensitivity | Sec. 2.2, 5, Fig. 2, 4 |
 //! | [`adaptation`] | world and display adaptation luminances | Sec. 4.4 |
 //! | [`acuity`] | highest resolvable frequency and the acuity Gaussian | Sec. 4.1, Eq. 7, Fig. 7 |
 //! | [`blur`] | a Gaussian blur whose cost does not grow with sigma | Sec. 4.1 |
 //! | [`colour`] | RGB primaries, XYZ, sRGB output | Sec. 4 |
 //! | [`operator`] | the whole steady-state operator, with a report | Sec. 4 |
+//! | [`chart`] | the paper's test scene: ColorChecker, Snellen chart, gratings, spectral | Sec. 5, Fig. 11 |
 //! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
 //! | [`io`] | Radiance, OpenEXR and PFM in; PNG, JPEG and EXR out | — |
 //!
@@ -28,6 +30,7 @@
 pub mod acuity;
 pub mod adaptation;
 pub mod blur;
+pub mod chart;
 pub mod colour;
 mod error;
 mod image;
@@ -38,6 +41,7 @@ pub mod observer;
 pub mod operator;
 pub mod scale;
 pub mod scotopic;
+pub mod spectral;
 pub mod tvi;
 
 pub use error::{Error, LimitsExceeded, Result};
