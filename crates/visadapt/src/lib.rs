@@ -20,6 +20,7 @@
 //! | [`operator`] | the whole steady-state operator, with a report | Sec. 4 |
 //! | [`chart`] | the paper's test scene: ColorChecker, Snellen chart, gratings, spectral | Sec. 5, Fig. 11 |
 //! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
+//! | [`visibility`] | thresholds per pixel, differences in JNDs, tolerance map, convergence test | Eq. 4–7, Sec. 6 |
 //! | [`io`] | Radiance, OpenEXR and PFM in; PNG, JPEG and EXR out | — |
 //!
 //! Units are in the names: `_cd_m2` is photopic cd/m², `_scotopic_cd_m2` is scotopic cd/m²
@@ -43,6 +44,7 @@ pub mod scale;
 pub mod scotopic;
 pub mod spectral;
 pub mod tvi;
+pub mod visibility;
 
 pub use error::{Error, LimitsExceeded, Result};
 pub use image::{DisplayImage, HdrImage, Projection, View};

@@ -1,0 +1,725 @@
+//! Visibility of luminance differences: the threshold at each pixel, the difference between
+//! two HDR images of one scene in just-noticeable differences (JNDs), a tolerance map and
+//! a convergence test for renderers.
+//!
+//! Ferwerda et al. 1996 built their model on threshold data, so that it "can be used to
+//! predict the visibility and appearance of scene features" and serve "as the basis of
+//! perceptually-based error metrics for limiting the precision of global illumination
+//! computations" (abstract, Sec. 6). This module is that use of the model's Eq. 4–7.
+//!
+//! # The observer
+//!
+//! A [`Viewer`] is a state of adaptation plus the acuity Gaussian of Eq. 7 in pixels.
+//! The state is plain values, so that it can come from anywhere:
+//!
+//! * from an image by the paper's rule (Sec. 4.4, half the highest visible luminance):
+//!   [`Viewer::for_image`], or from an [`operator::plan`] report: [`Viewer::from_report`];
+//! * from given adaptation luminances: [`Viewer::steady_state`];
+//! * from a time-varying adaptation state: fill a [`Sensitivity`] with its thresholds;
+//! * per pixel ([`Adaptation::Local`]): a map of adaptation luminances, one per pixel
+//!   (e.g. a foveal average around each pixel, as Ward Larson et al. 1997 use), where
+//!   Eq. 4–6 are evaluated at each pixel's own levels.
+//!
+//! In the paper's model the observer is adapted to one level for the whole scene, so by
+//! default the thresholds are the same everywhere: a 1 cd/m² change is as visible in the
+//! shadows as in the highlights. Note what the Sec. 4.4 rule implies for a uniform field at
+//! luminance `L`: the observer adapts to `L/2`, so the threshold is `t(L/2)`, not `t(L)`.
+//!
+//! # From a difference to JNDs
+//!
+//! For a reference image `R` and a test image `T` of the same scene, at each pixel:
+//!
+//! 1. **Signals.** Photopic luminance `Y` (cd/m²) and scotopic luminance `V` (scotopic
+//!    cd/m², the file's channel or [`scotopic::from_xyz`]) of both images, with the
+//!    operator's bad-pixel rule (a pixel with a NaN or infinite channel reads as black,
+//!    negative channels as 0). Their differences `ΔY = Y_T − Y_R`, `ΔV = V_T − V_R`.
+//! 2. **Acuity (Eq. 7).** Both difference planes are filtered with the acuity Gaussian `G`,
+//!    whose response at the cutoff frequency `ω_c(L_wa)` equals the threshold contrast
+//!    `t(L_wa)/L_wa`. Filtering the difference is filtering both images and subtracting (the
+//!    filter is linear). So a full-contrast grating at `ω_c` on a background at the
+//!    adaptation luminance comes out at 1 JND, a finer one below, a coarser one above:
+//!    detail above the acuity cutoff is invisible.
+//! 3. **Each mechanism in its threshold units.**
+//!    cones `d_c = |G∗ΔY| / t_p`, with `t_p` the cone threshold (Eq. 4) in cd/m²;
+//!    rods `d_r = k·|G∗ΔV| / t_s`, with `t_s` the rod threshold (Eq. 5) in scotopic cd/m²
+//!    and `k` the rod weight of Eq. 6.
+//! 4. **Pooling.** `JND = (d_c^β + d_r^β)^(1/β)` with `β` = [`POOLING_EXPONENT`] = 3.5.
+//! 5. **Visible** when `JND ≥ 1` ([`VISIBLE_JND`]).
+//!
+//! ## Why the rods are weighted by `k`
+//!
+//! Eq. 5 has no saturation: its Weber branch goes on to any luminance, while the paper says
+//! rods are "shutting down due to saturation" at high mesopic levels (Sec. 4) and lets `k`
+//! (Eq. 6) express that. Weighting the rod signal by `k` also makes the JND agree with what
+//! the operator shows: on the display a pure cone change `ΔY` becomes
+//! `m_p·ΔY = t_p(L_da)·ΔY/t_p(L_wa)`, i.e. exactly `d_c` display-observer JNDs, and a pure
+//! rod change becomes `k·m_s·ΔV = t_p(L_da)·k·ΔV/t_s(L_wa,s)`, exactly `d_r` (Eq. 3, 6).
+//!
+//! ## Why probability summation
+//!
+//! The operator adds the two signals on the display (`d_c + d_r`, with signs), but the rods
+//! and the cones are separate detectors: a change that raises `Y` and lowers `V` (a blue
+//! surface turning red) would cancel in a signed sum although each system sees it. Two
+//! independent detectors with Weibull psychometric functions of slope `β` combine by
+//! probability summation into a Minkowski sum of exponent `β` (Quick 1974; Graham 1989,
+//! *Visual Pattern Analyzers*, p. 165). The result lies between the envelope of the rod and
+//! cone curves (`β → ∞`, the paper's Sec. 3.2: "the visual system's threshold sensitivity
+//! can be described by the envelope of the rod and cone t.v.i. curves") and the operator's
+//! sum (`β = 1`): a change seen by one system alone scores that system's JNDs, and two
+//! systems at threshold together reach `2^(1/3.5)` = 1.22 JND.
+//!
+//! # Tolerance map
+//!
+//! [`tolerance_map`] gives, per pixel, the luminance threshold `T` in cd/m²: the size of a
+//! luminance change *in the pixel's own colour* (its X, Y, Z and scotopic values scaled
+//! together, so `ΔV = r·ΔY` with `r = V/Y`) that reaches 1 JND over an area large against
+//! the acuity Gaussian:
+//! `T = 1 / ((1/t_p)^β + (k·r/t_s)^β)^(1/β)`.
+//! With a global adaptation, an error smaller than `T` at every pixel is invisible whatever
+//! its spatial extent (the acuity Gaussian is a positive kernel of unit sum and the pooling is
+//! a norm, so filtering can only lower the JNDs), so `T` is the largest error a renderer can
+//! allow without knowing how its errors are correlated.
+//! Black pixels take `r` of equal-energy white, 2.261 (the paper's illuminant).
+//!
+//! # Convergence test
+//!
+//! [`converged`] asks whether the difference between two successive estimates of an image
+//! is invisible: every pixel under 1 JND. For a progressive Monte Carlo estimate that
+//! doubles its samples, the difference between the estimates after `N` and `2N` samples has
+//! the standard deviation of the error of the `2N` estimate itself, so this also says that
+//! the remaining noise is (just) invisible.
+
+use crate::acuity::AcuityFilter;
+use crate::mesopic::rod_weight;
+use crate::operator::{self, MIN_BLUR_SIGMA_PX, Report, ViewingConditions};
+use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
+use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
+use crate::{Error, HdrImage, Result};
+
+/// Exponent `β` of the probability summation of the rod and cone signals: the slope of a
+/// Weibull psychometric function for contrast detection. 3.5 is the value of Daly's Visible
+/// Differences Predictor (Daly 1993), inside the range 2–4 reported for detection (Graham
+/// 1989, p. 165).
+pub const POOLING_EXPONENT: f64 = 3.5;
+
+/// A difference is visible from this many JNDs on (the threshold itself).
+pub const VISIBLE_JND: f32 = 1.0;
+
+/// The thresholds of an observer in one state of adaptation: plain values, so that a steady
+/// state (Eq. 4–6) or a time-varying state can supply them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sensitivity {
+    /// Cone increment threshold, cd/m² (Eq. 4 in steady state).
+    pub cone_threshold_cd_m2: f64,
+    /// Rod increment threshold, scotopic cd/m² (Eq. 5 in steady state).
+    pub rod_threshold_scotopic_cd_m2: f64,
+    /// Weight of the rod signal, `k` of Eq. 6: 1 below the mesopic range, 0 above it.
+    pub rod_weight: f64,
+}
+
+impl Sensitivity {
+    /// Steady state: Eq. 4 at the photopic adaptation `adaptation_cd_m2`, Eq. 5 and Eq. 6 at
+    /// the scotopic adaptation `adaptation_scotopic_cd_m2`.
+    pub fn steady_state(adaptation_cd_m2: f64, adaptation_scotopic_cd_m2: f64) -> Self {
+        Sensitivity {
+            cone_threshold_cd_m2: cone_threshold_cd_m2(adaptation_cd_m2),
+            rod_threshold_scotopic_cd_m2: rod_threshold_scotopic_cd_m2(adaptation_scotopic_cd_m2),
+            rod_weight: rod_weight(adaptation_scotopic_cd_m2),
+        }
+    }
+
+    /// The thresholds an [`operator::plan`] report used.
+    pub fn from_report(report: &Report) -> Self {
+        Sensitivity {
+            cone_threshold_cd_m2: report.cone_threshold_cd_m2,
+            rod_threshold_scotopic_cd_m2: report.rod_threshold_scotopic_cd_m2,
+            rod_weight: report.mapping.rod_weight,
+        }
+    }
+
+    /// Check that both thresholds are positive and finite and `k` is in [0, 1].
+    pub fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("cone-threshold", self.cone_threshold_cd_m2),
+            ("rod-threshold", self.rod_threshold_scotopic_cd_m2),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::invalid(
+                    name,
+                    v,
+                    "must be a positive, finite luminance",
+                ));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.rod_weight) {
+            return Err(Error::invalid(
+                "rod-weight",
+                self.rod_weight,
+                "must be in [0, 1]",
+            ));
+        }
+        Ok(())
+    }
+
+    /// JNDs of a change of `delta_cd_m2` photopic and `delta_scotopic_cd_m2` scotopic
+    /// luminance that covers an area large against the acuity Gaussian (steps 3–4 of the
+    /// module docs).
+    pub fn jnd(&self, delta_cd_m2: f64, delta_scotopic_cd_m2: f64) -> f64 {
+        pool(
+            delta_cd_m2.abs() / self.cone_threshold_cd_m2,
+            self.rod_weight * delta_scotopic_cd_m2.abs() / self.rod_threshold_scotopic_cd_m2,
+        )
+    }
+
+    /// The luminance threshold (cd/m²) of a change of a colour whose scotopic/photopic
+    /// luminance ratio is `sp_ratio` (2.261 for equal-energy white): the `ΔY` for which
+    /// [`jnd`](Self::jnd)`(ΔY, sp_ratio·ΔY)` is 1.
+    pub fn threshold_cd_m2(&self, sp_ratio: f64) -> f64 {
+        1.0 / pool(
+            1.0 / self.cone_threshold_cd_m2,
+            self.rod_weight * sp_ratio.max(0.0) / self.rod_threshold_scotopic_cd_m2,
+        )
+    }
+
+    /// Per-unit sensitivities `(1/t_p, k/t_s)` as f32, the form the pixel loops use.
+    fn gains(&self) -> (f32, f32) {
+        (
+            (1.0 / self.cone_threshold_cd_m2) as f32,
+            (self.rod_weight / self.rod_threshold_scotopic_cd_m2) as f32,
+        )
+    }
+}
+
+/// Probability summation of two detectabilities: `(a^β + b^β)^(1/β)`, computed without
+/// overflow as `m·(1 + (n/m)^β)^(1/β)` with `m = max(a, b)`, `n = min(a, b)`.
+fn pool(a: f64, b: f64) -> f64 {
+    let (m, n) = if a >= b { (a, b) } else { (b, a) };
+    if m == 0.0 {
+        return 0.0;
+    }
+    m * (1.0 + (n / m).powf(POOLING_EXPONENT)).powf(1.0 / POOLING_EXPONENT)
+}
+
+/// [`pool`] in f32, for the pixel loops.
+#[inline]
+fn pool_f32(a: f32, b: f32) -> f32 {
+    const BETA: f32 = POOLING_EXPONENT as f32;
+    const INV_BETA: f32 = (1.0 / POOLING_EXPONENT) as f32;
+    let (m, n) = if a >= b { (a, b) } else { (b, a) };
+    if m == 0.0 {
+        return 0.0;
+    }
+    m * (1.0 + (n / m).powf(BETA)).powf(INV_BETA)
+}
+
+/// Where the observer's thresholds come from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Adaptation<'a> {
+    /// One state for the whole field of view: the paper's observer adapted to `L_wa`
+    /// (Sec. 4.4), or a time-varying state.
+    Global(Sensitivity),
+    /// Local adaptation: each pixel's own photopic (cd/m²) and scotopic (scotopic cd/m²)
+    /// adaptation luminance, in steady state (Eq. 4–6 at each pixel). Both maps hold one
+    /// value per pixel, row-major; values must be finite and non-negative.
+    Local {
+        /// Photopic adaptation luminance per pixel, cd/m².
+        adaptation_cd_m2: &'a [f32],
+        /// Scotopic adaptation luminance per pixel, scotopic cd/m².
+        adaptation_scotopic_cd_m2: &'a [f32],
+    },
+}
+
+impl Adaptation<'_> {
+    /// `(1/t_p, k/t_s)` at pixel `i`.
+    #[inline]
+    fn gains_at(&self, global: (f32, f32), i: usize) -> (f32, f32) {
+        match self {
+            Adaptation::Global(_) => global,
+            Adaptation::Local {
+                adaptation_cd_m2,
+                adaptation_scotopic_cd_m2,
+            } => Sensitivity::steady_state(
+                f64::from(adaptation_cd_m2[i]),
+                f64::from(adaptation_scotopic_cd_m2[i]),
+            )
+            .gains(),
+        }
+    }
+
+    fn global_gains(&self) -> (f32, f32) {
+        match self {
+            Adaptation::Global(s) => s.gains(),
+            Adaptation::Local { .. } => (0.0, 0.0),
+        }
+    }
+
+    fn validate(&self, pixels: usize) -> Result<()> {
+        match self {
+            Adaptation::Global(s) => s.validate(),
+            Adaptation::Local {
+                adaptation_cd_m2,
+                adaptation_scotopic_cd_m2,
+            } => {
+                for (name, map) in [
+                    ("adaptation map", adaptation_cd_m2),
+                    ("scotopic adaptation map", adaptation_scotopic_cd_m2),
+                ] {
+                    if map.len() != pixels {
+                        return Err(Error::invalid(
+                            name,
+                            format!("of {} values", map.len()),
+                            format!("must hold one value per pixel ({pixels})"),
+                        ));
+                    }
+                    if let Some(v) = map.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+                        return Err(Error::invalid(
+                            name,
+                            v,
+                            "values must be finite, non-negative luminances",
+                        ));
+                    }
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// An observer looking at an image: a state of adaptation and the acuity Gaussian.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Viewer<'a> {
+    /// The thresholds, global or per pixel.
+    pub adaptation: Adaptation<'a>,
+    /// Standard deviation of the acuity Gaussian of Eq. 7, pixels; 0 for no acuity limit.
+    pub acuity_sigma_px: f64,
+}
+
+impl Viewer<'static> {
+    /// The observer the operator would use for `image` under `conditions` (adaptation by
+    /// Sec. 4.4 or as given, acuity from the view), with the report of [`operator::plan`].
+    pub fn for_image(image: &HdrImage, conditions: &ViewingConditions) -> Result<(Self, Report)> {
+        let report = operator::plan(image, conditions)?;
+        Ok((Viewer::from_report(&report), report))
+    }
+
+    /// The observer of an [`operator::plan`] report: its thresholds, and its acuity blur
+    /// (none when the report's acuity was off or below [`MIN_BLUR_SIGMA_PX`]).
+    pub fn from_report(report: &Report) -> Self {
+        Viewer {
+            adaptation: Adaptation::Global(Sensitivity::from_report(report)),
+            acuity_sigma_px: report.mapping.blur_sigma_px,
+        }
+    }
+
+    /// A steady-state observer adapted to `adaptation_cd_m2` (cones) and
+    /// `adaptation_scotopic_cd_m2` (rods), looking at an image with `pixels_per_degree`
+    /// (`None`: no acuity limit). The acuity Gaussian is Eq. 7 at that adaptation, skipped
+    /// below [`MIN_BLUR_SIGMA_PX`] as the operator does.
+    pub fn steady_state(
+        adaptation_cd_m2: f64,
+        adaptation_scotopic_cd_m2: f64,
+        pixels_per_degree: Option<f64>,
+    ) -> Self {
+        let sigma = pixels_per_degree.map_or(0.0, |ppd| {
+            AcuityFilter::new(adaptation_cd_m2, adaptation_scotopic_cd_m2).sigma_deg * ppd
+        });
+        Viewer {
+            adaptation: Adaptation::Global(Sensitivity::steady_state(
+                adaptation_cd_m2,
+                adaptation_scotopic_cd_m2,
+            )),
+            acuity_sigma_px: if sigma >= MIN_BLUR_SIGMA_PX {
+                sigma
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+impl Viewer<'_> {
+    /// Check the thresholds, the maps' sizes against `pixels`, and the blur size.
+    pub fn validate(&self, pixels: usize) -> Result<()> {
+        self.adaptation.validate(pixels)?;
+        if !(self.acuity_sigma_px.is_finite() && self.acuity_sigma_px >= 0.0) {
+            return Err(Error::invalid(
+                "acuity-sigma",
+                self.acuity_sigma_px,
+                "must be a finite, non-negative number of pixels",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The difference between two images in JNDs, per pixel and summarised.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Difference {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// JNDs per pixel, row-major (see the module docs for the definition).
+    pub jnd: Vec<f32>,
+    /// Fraction of pixels at or above [`VISIBLE_JND`].
+    pub visible_fraction: f64,
+    /// Mean JNDs over all pixels.
+    pub mean_jnd: f64,
+    /// Largest JNDs of any pixel.
+    pub max_jnd: f64,
+    /// Pixels with a NaN or infinite channel in either image (read as black, as the
+    /// operator shows them).
+    pub non_finite_pixels: usize,
+}
+
+impl Difference {
+    /// True when no pixel differs visibly (every pixel under [`VISIBLE_JND`]).
+    pub fn is_invisible(&self) -> bool {
+        self.max_jnd < f64::from(VISIBLE_JND)
+    }
+}
+
+/// The difference between `reference` and `test` (same scene, same size) in JNDs for
+/// `viewer`, per pixel, with its visible fraction, mean and maximum.
+///
+/// ```
+/// use visadapt::{HdrImage, operator::ViewingConditions, visibility};
+/// // A grey scene at 100 cd/m² and the same scene 2 % brighter on its left half.
+/// let mut reference = HdrImage::zeros(32, 32);
+/// reference.x.fill(100.0); reference.y.fill(100.0); reference.z.fill(100.0);
+/// let mut test = reference.clone();
+/// for i in (0..test.len()).filter(|i| i % 32 < 16) {
+///     test.x[i] *= 1.02; test.y[i] *= 1.02; test.z[i] *= 1.02;
+/// }
+/// let (viewer, report) = visibility::Viewer::for_image(&reference, &ViewingConditions::default())?;
+/// let d = visibility::difference(&reference, &test, &viewer)?;
+/// // Adapted to 50 cd/m² (Sec. 4.4), the cones' threshold is 3.08 cd/m²: 2 cd/m² is 0.65 JND.
+/// assert!((report.cone_threshold_cd_m2 - 3.08).abs() < 0.01);
+/// assert!((d.max_jnd - 0.65).abs() < 0.01 && d.is_invisible());
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn difference(reference: &HdrImage, test: &HdrImage, viewer: &Viewer) -> Result<Difference> {
+    check_pair(reference, test)?;
+    let n = reference.len();
+    viewer.validate(n)?;
+    let (width, height) = (reference.width, reference.height);
+
+    // Steps 1–2: the photopic and scotopic difference planes, then the acuity Gaussian.
+    let mut dy = vec![0f32; n];
+    let mut dv = vec![0f32; n];
+    let non_finite = par_chunks2(&mut dy, &mut dv, |start, dy, dv| {
+        let mut bad = 0;
+        for (j, (dy, dv)) in dy.iter_mut().zip(dv.iter_mut()).enumerate() {
+            let (yr, vr, okr) = signals(reference, start + j);
+            let (yt, vt, okt) = signals(test, start + j);
+            bad += usize::from(!(okr && okt));
+            *dy = yt - yr;
+            *dv = vt - vr;
+        }
+        bad
+    });
+    if viewer.acuity_sigma_px > 0.0 {
+        acuity_blur(
+            &mut [dy.as_mut_slice(), dv.as_mut_slice()],
+            width,
+            height,
+            viewer.acuity_sigma_px as f32,
+        );
+    }
+
+    // Steps 3–4: each mechanism in its threshold units, pooled. The result goes into `dy`.
+    let adaptation = &viewer.adaptation;
+    let global = adaptation.global_gains();
+    par_chunks2(&mut dy, &mut dv, |start, dy, dv| {
+        for (j, (d, v)) in dy.iter_mut().zip(dv.iter()).enumerate() {
+            let (cone, rod) = adaptation.gains_at(global, start + j);
+            *d = pool_f32(d.abs() * cone, v.abs() * rod);
+        }
+        0
+    });
+    let jnd = dy;
+    let (visible, sum, max) = summarise(&jnd);
+    Ok(Difference {
+        width,
+        height,
+        visible_fraction: visible as f64 / n as f64,
+        mean_jnd: sum / n as f64,
+        max_jnd: f64::from(max),
+        jnd,
+        non_finite_pixels: non_finite,
+    })
+}
+
+/// The convergence test for a progressive renderer: is the difference between `current`
+/// and `previous` invisible to `viewer` (every pixel under 1 JND)?
+pub fn converged(previous: &HdrImage, current: &HdrImage, viewer: &Viewer) -> Result<bool> {
+    Ok(difference(previous, current, viewer)?.is_invisible())
+}
+
+/// Per pixel, the luminance threshold in cd/m²: the largest luminance error, in the pixel's
+/// own colour, that stays invisible to `viewer` whatever its spatial extent (see the module
+/// docs). The acuity Gaussian only makes fine-grained errors less visible still, so it is not
+/// used here.
+pub fn tolerance_map(image: &HdrImage, viewer: &Viewer) -> Result<Vec<f32>> {
+    image.check_consistent()?;
+    let n = image.len();
+    viewer.validate(n)?;
+    let adaptation = &viewer.adaptation;
+    let global = adaptation.global_gains();
+    let mut out = vec![0f32; n];
+    par_chunks2(&mut out, &mut [], |start, out, _| {
+        for (j, o) in out.iter_mut().enumerate() {
+            let (y, v, _) = signals(image, start + j);
+            let ratio = if y > 0.0 {
+                v / y
+            } else {
+                EQUAL_ENERGY_SP_RATIO as f32
+            };
+            let (cone, rod) = adaptation.gains_at(global, start + j);
+            *o = 1.0 / pool_f32(cone, rod * ratio);
+        }
+        0
+    });
+    Ok(out)
+}
+
+/// Both images consistent and of the same size.
+fn check_pair(reference: &HdrImage, test: &HdrImage) -> Result<()> {
+    reference.check_consistent()?;
+    test.check_consistent()?;
+    if (reference.width, reference.height) != (test.width, test.height) {
+        return Err(Error::invalid(
+            "image size",
+            format!("{}x{}", test.width, test.height),
+            format!(
+                "differs from the reference image's {}x{}",
+                reference.width, reference.height
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Photopic and scotopic luminance of pixel `i` under the operator's bad-pixel rule (a pixel
+/// with a non-finite channel is black, negative channels read as 0), and whether the pixel
+/// was finite.
+#[inline]
+fn signals(image: &HdrImage, i: usize) -> (f32, f32, bool) {
+    let (x, y, z) = (image.x[i], image.y[i], image.z[i]);
+    let s = image.scotopic.as_ref().map(|s| s[i]);
+    let finite = x.is_finite() && y.is_finite() && z.is_finite() && s.is_none_or(f32::is_finite);
+    if !finite {
+        return (0.0, 0.0, false);
+    }
+    let v = match s {
+        Some(s) => s.max(0.0),
+        None => scotopic::from_xyz(x.max(0.0), y.max(0.0), z.max(0.0)),
+    };
+    (y.max(0.0), v, true)
+}
+
+/// Pixels at or above [`VISIBLE_JND`], the sum (f64) and the maximum of a JND plane.
+fn summarise(jnd: &[f32]) -> (usize, f64, f32) {
+    let chunk = |c: &[f32]| {
+        c.iter().fold((0usize, 0f64, 0f32), |(n, s, m), &j| {
+            (
+                n + usize::from(j >= VISIBLE_JND),
+                s + f64::from(j),
+                m.max(j),
+            )
+        })
+    };
+    let add = |a: (usize, f64, f32), b: (usize, f64, f32)| (a.0 + b.0, a.1 + b.1, a.2.max(b.2));
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        jnd.par_chunks(CHUNK)
+            .map(chunk)
+            .reduce(|| (0, 0.0, 0.0), add)
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        jnd.chunks(CHUNK).map(chunk).fold((0, 0.0, 0.0), add)
+    }
+}
+
+/// Samples per parallel work item.
+const CHUNK: usize = 1 << 14;
+
+/// Run `f(start, a_chunk, b_chunk)` over matching chunks of two planes (`b` may be empty,
+/// then `f` gets empty chunks), in parallel with the `rayon` feature; sums `f`'s results.
+fn par_chunks2(
+    a: &mut [f32],
+    b: &mut [f32],
+    f: impl Fn(usize, &mut [f32], &mut [f32]) -> usize + Sync,
+) -> usize {
+    let run = |(c, a): (usize, &mut [f32]), b: &mut [f32]| f(c * CHUNK, a, b);
+    let paired = !b.is_empty();
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        if paired {
+            a.par_chunks_mut(CHUNK)
+                .enumerate()
+                .zip(b.par_chunks_mut(CHUNK))
+                .map(|(a, b)| run(a, b))
+                .sum()
+        } else {
+            a.par_chunks_mut(CHUNK)
+                .enumerate()
+                .map(|a| run(a, &mut []))
+                .sum()
+        }
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        if paired {
+            a.chunks_mut(CHUNK)
+                .enumerate()
+                .zip(b.chunks_mut(CHUNK))
+                .map(|(a, b)| run(a, b))
+                .sum()
+        } else {
+            a.chunks_mut(CHUNK)
+                .enumerate()
+                .map(|a| run(a, &mut []))
+                .sum()
+        }
+    }
+}
+
+/// The acuity Gaussian of Eq. 7 on flat planes.
+///
+/// A direct separable convolution (4 sigma each side, edges repeated), standing in until
+/// `blur::gaussian_blur_planes`, whose cost does not grow with sigma, lands.
+fn acuity_blur(planes: &mut [&mut [f32]], width: usize, height: usize, sigma_px: f32) {
+    let radius = ((4.0 * sigma_px).ceil() as usize).min(width.max(height));
+    let mut weights: Vec<f32> = (0..=2 * radius)
+        .map(|k| {
+            let x = k as f32 - radius as f32;
+            (-x * x / (2.0 * sigma_px * sigma_px)).exp()
+        })
+        .collect();
+    let total: f32 = weights.iter().sum();
+    weights.iter_mut().for_each(|w| *w /= total);
+    let clamp = |i: isize, n: usize| i.clamp(0, n as isize - 1) as usize;
+    for plane in planes.iter_mut() {
+        let src = plane.to_vec();
+        // Horizontal pass into `tmp`, vertical pass back into the plane.
+        let mut tmp = vec![0f32; src.len()];
+        for (row_in, row_out) in src.chunks_exact(width).zip(tmp.chunks_exact_mut(width)) {
+            for (x, o) in row_out.iter_mut().enumerate() {
+                *o = weights
+                    .iter()
+                    .enumerate()
+                    .map(|(k, w)| {
+                        w * row_in[clamp(x as isize + k as isize - radius as isize, width)]
+                    })
+                    .sum();
+            }
+        }
+        for (y, row_out) in plane.chunks_exact_mut(width).enumerate() {
+            row_out.fill(0.0);
+            for (k, w) in weights.iter().enumerate() {
+                let yy = clamp(y as isize + k as isize - radius as isize, height);
+                let row_in = &tmp[yy * width..(yy + 1) * width];
+                row_out
+                    .iter_mut()
+                    .zip(row_in)
+                    .for_each(|(o, v)| *o += w * v);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pooling_is_the_envelope_for_one_system_and_sums_two_at_threshold() {
+        assert_eq!(pool(0.0, 0.0), 0.0);
+        assert_eq!(pool(2.5, 0.0), 2.5);
+        assert_eq!(pool(0.0, 0.7), 0.7);
+        // Two systems at threshold: 2^(1/3.5) = 1.2190.
+        assert!((pool(1.0, 1.0) - 1.219_0).abs() < 1e-4);
+        assert!((pool_f32(1.0, 1.0) - 1.219_0).abs() < 1e-4);
+        // No overflow for huge signals.
+        assert!((pool(1e300, 1e300) / 1e300 - 1.219_0).abs() < 1e-4);
+        assert!(pool_f32(1e30, 2e30).is_finite());
+    }
+
+    #[test]
+    fn daylight_threshold_is_the_cone_threshold() {
+        // 100 cd/m² (k = 0): Eq. 4 Weber branch, 10^(2 − 1.255) = 5.559 cd/m².
+        let s = Sensitivity::steady_state(100.0, 226.1);
+        assert_eq!(s.rod_weight, 0.0);
+        assert!((s.threshold_cd_m2(2.261) - 5.559).abs() < 1e-3);
+        assert!((s.jnd(5.559, 100.0) - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn starlight_threshold_is_set_by_the_rods() {
+        // 1e-3 cd/m², 2.261e-3 scotopic (k = 1): rods at 10^((0.405·log(2.261e-3) + 1.6)^2.18
+        // − 2.86) = 2.4491e-3 scotopic cd/m²; per photopic cd/m² of white that is
+        // 2.4491e-3 / 2.261 = 1.0832e-3 cd/m², far below the cones' 10^-0.72 = 0.1905.
+        let s = Sensitivity::steady_state(1e-3, 2.261e-3);
+        assert_eq!(s.rod_weight, 1.0);
+        assert!((s.rod_threshold_scotopic_cd_m2 / 2.449_1e-3 - 1.0).abs() < 1e-4);
+        let t = s.threshold_cd_m2(2.261);
+        let rod_only = s.rod_threshold_scotopic_cd_m2 / 2.261;
+        // The cones add (1.0832e-3/0.1905)^3.5 ≈ 1.4e-8 of pooled signal: negligible.
+        assert!((t / rod_only - 1.0).abs() < 1e-6, "{t} vs {rod_only}");
+        // A red surface with no scotopic signal is seen by the cones alone.
+        assert!((s.threshold_cd_m2(0.0) - 10f64.powf(-0.72)).abs() < 1e-9);
+        assert!((s.jnd(t, 2.261 * t) - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn validation_catches_bad_states() {
+        let good = Sensitivity::steady_state(1.0, 2.261);
+        assert!(good.validate().is_ok());
+        for bad in [
+            Sensitivity {
+                cone_threshold_cd_m2: 0.0,
+                ..good
+            },
+            Sensitivity {
+                rod_threshold_scotopic_cd_m2: f64::NAN,
+                ..good
+            },
+            Sensitivity {
+                rod_weight: 1.5,
+                ..good
+            },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
+        let short = [1.0f32; 3];
+        let local = Adaptation::Local {
+            adaptation_cd_m2: &short,
+            adaptation_scotopic_cd_m2: &short,
+        };
+        assert!(local.validate(4).is_err());
+        assert!(local.validate(3).is_ok());
+        let nan = [f32::NAN; 3];
+        let local = Adaptation::Local {
+            adaptation_cd_m2: &short,
+            adaptation_scotopic_cd_m2: &nan,
+        };
+        assert!(local.validate(3).is_err());
+    }
+
+    #[test]
+    fn fir_blur_keeps_constants_and_unit_sum() {
+        let (w, h) = (31, 21);
+        let mut a = vec![3.0f32; w * h];
+        let mut b = vec![0.0f32; w * h];
+        b[10 * w + 15] = 1.0;
+        acuity_blur(&mut [a.as_mut_slice(), b.as_mut_slice()], w, h, 1.3);
+        assert!(a.iter().all(|v| (v - 3.0).abs() < 1e-5));
+        let s: f32 = b.iter().sum();
+        assert!((s - 1.0).abs() < 1e-5, "{s}");
+        assert!(b[10 * w + 15] < 0.2 && b[10 * w + 16] > 0.05);
+    }
+}
