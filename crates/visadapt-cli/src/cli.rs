@@ -23,6 +23,16 @@ pub enum Command {
     /// What an observer adapted to a luminance can see: thresholds, scale factors, acuity.
     #[command(after_help = OBSERVER_EXAMPLES)]
     Observer(ObserverArgs),
+    /// Write the paper's test scene (ColorChecker, Snellen chart, gratings) as an EXR.
+    #[command(after_help = CHART_EXAMPLES)]
+    Chart(ChartArgs),
+    /// Render the built-in scene at the paper's four light levels (Fig. 11): panels, a
+    /// labelled contact sheet and a table of what each observer can see.
+    #[command(after_help = DEMO_EXAMPLES)]
+    Demo(DemoArgs),
+    /// Draw one of the paper's model figures from the library's own functions.
+    #[command(after_help = PLOT_EXAMPLES)]
+    Plot(PlotArgs),
 }
 
 const MAP_EXAMPLES: &str = "\
@@ -127,4 +137,83 @@ fn parse_bits(s: &str) -> Result<u8, String> {
         "16" => Ok(16),
         _ => Err(format!("{s} is not 8 or 16")),
     }
+}
+
+const CHART_EXAMPLES: &str = "\
+Examples:
+  visadapt chart -o chart.exr --white 0.04            # the chart lit at moonlight level
+  visadapt chart -o near.exr --white 100 --fov 30     # seen from nearer (scene spans 30 degrees)
+
+The EXR holds X, Y, Z (cd/m²) and scotopic (scotopic cd/m²), the paper's layout. EXR files
+do not record the view: map them with the --fov that `chart` prints.";
+
+const DEMO_EXAMPLES: &str = "\
+Examples:
+  visadapt demo                       # writes visadapt-demo/
+  visadapt demo -o out --levels 100,1,0.01";
+
+const PLOT_EXAMPLES: &str = "\
+Examples:
+  visadapt plot tvi -o tvi.svg
+  visadapt plot fig4 -o spectral-sensitivity.png";
+
+#[derive(Debug, Args)]
+pub struct ChartArgs {
+    /// Output OpenEXR file.
+    #[arg(short, long)]
+    pub output: PathBuf,
+
+    /// Luminance of the white patch and the Snellen chart's paper, cd/m².
+    #[arg(long, value_name = "L", allow_negative_numbers = true)]
+    pub white: f64,
+
+    /// Horizontal field of view of the scene in degrees: the viewer stands where the scene
+    /// spans DEG, the image keeps its size [default: 20 ft (6.096 m), the Snellen design
+    /// distance, where line 20/x tests 20/x acuity].
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    pub fov: Option<f64>,
+
+    /// Leave out the square-wave gratings.
+    #[arg(long)]
+    pub no_gratings: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Directory for the panels and the contact sheet (created if missing).
+    #[arg(short, long, value_name = "DIR", default_value = "visadapt-demo")]
+    pub output: PathBuf,
+
+    /// Luminances of the white patch to render, cd/m², comma-separated.
+    #[arg(long, value_name = "L,...", value_delimiter = ',', allow_negative_numbers = true,
+          default_values_t = [1000.0, 10.0, 0.04, 0.001])]
+    pub levels: Vec<f64>,
+}
+
+#[derive(Debug, Args)]
+pub struct PlotArgs {
+    /// The figure to draw.
+    #[arg(value_enum, value_name = "NAME")]
+    pub name: PlotName,
+
+    /// Output picture; the format follows the extension (.svg or .png).
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// The model figures `visadapt plot` draws.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PlotName {
+    /// Fig. 2: photopic V(λ) and scotopic V'(λ) luminous efficiency.
+    #[value(name = "luminous-efficiency", alias = "fig2")]
+    LuminousEfficiency,
+    /// Fig. 3: cone and rod threshold-versus-intensity curves (Eq. 4, 5).
+    #[value(name = "tvi", alias = "fig3")]
+    Tvi,
+    /// Fig. 4: spectral sensitivity at scotopic, mesopic and photopic levels.
+    #[value(name = "spectral-sensitivity", alias = "fig4")]
+    SpectralSensitivity,
+    /// Fig. 7: highest resolvable grating frequency against luminance.
+    #[value(name = "acuity", alias = "fig7")]
+    Acuity,
 }

@@ -5,6 +5,7 @@
 
 mod cli;
 mod commands;
+mod graphics;
 mod report;
 
 use clap::Parser;
@@ -39,6 +40,9 @@ fn main() -> ExitCode {
     let result = match cli.command {
         cli::Command::Map(args) => commands::map::run(args),
         cli::Command::Observer(args) => commands::observer::run(args),
+        cli::Command::Chart(args) => commands::chart::run(args),
+        cli::Command::Demo(args) => commands::demo::run(args),
+        cli::Command::Plot(args) => commands::plot::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

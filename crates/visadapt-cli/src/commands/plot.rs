@@ -1,0 +1,324 @@
+//! `visadapt plot NAME -o FILE.svg|png`: the paper's model figures, drawn from the library's
+//! own functions (nothing is read from stored numbers but the CIE tables).
+//!
+//! * `luminous-efficiency` (Fig. 2): CIE 1924/1931 V(λ) and CIE 1951 V'(λ)
+//!   ([`visadapt::spectral`], Sprague-interpolated to 1 nm);
+//! * `tvi` (Fig. 3): the cone and rod threshold-versus-intensity curves, Eq. 4 and Eq. 5
+//!   ([`visadapt::tvi`]);
+//! * `spectral-sensitivity` (Fig. 4): rod, cone and system sensitivity to monochromatic
+//!   light at scotopic, mesopic and photopic levels, derived from Eq. 4–6 and the
+//!   luminous efficiency functions ([`visadapt::spectral::sensitivity`] explains how);
+//! * `acuity` (Fig. 7): the highest resolvable grating frequency against luminance (the
+//!   Shaler fit of [`visadapt::acuity`]).
+
+use crate::cli::{PlotArgs, PlotName};
+use crate::graphics::{self, FAMILY, PictureFormat};
+use anyhow::anyhow;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use visadapt::spectral::sensitivity::{
+    FIG4_MESOPIC_CD_M2, FIG4_PHOTOPIC_CD_M2, FIG4_SCOTOPIC_CD_M2, spectral_sensitivity,
+};
+use visadapt::spectral::{interpolate, tables};
+use visadapt::{acuity, tvi};
+
+/// Colour of the cone (photopic) curves.
+const CONES: RGBColor = RGBColor(200, 40, 30);
+/// Colour of the rod (scotopic) curves.
+const RODS: RGBColor = RGBColor(30, 70, 200);
+
+pub fn run(args: PlotArgs) -> anyhow::Result<()> {
+    let format = PictureFormat::from_path(&args.output)?;
+    render(args.name, format, &args.output)?;
+    println!("wrote {} ({})", args.output.display(), title(args.name));
+    Ok(())
+}
+
+/// Draw figure `name` into `path` in `format`, atomically.
+pub fn render(name: PlotName, format: PictureFormat, path: &std::path::Path) -> anyhow::Result<()> {
+    graphics::register_font();
+    let size = match name {
+        PlotName::SpectralSensitivity => (1500, 560),
+        _ => (900, 600),
+    };
+    match format {
+        PictureFormat::Svg => {
+            let mut svg = String::new();
+            {
+                let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+                draw(&root, name)?;
+                root.present().map_err(plot_error)?;
+            }
+            graphics::write_text(path, &svg)
+        }
+        PictureFormat::Png => {
+            let mut rgb = vec![0u8; size.0 as usize * size.1 as usize * 3];
+            {
+                let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
+                draw(&root, name)?;
+                root.present().map_err(plot_error)?;
+            }
+            graphics::write_rgb_png(path, size.0, size.1, &rgb)
+        }
+    }
+}
+
+fn title(name: PlotName) -> &'static str {
+    match name {
+        PlotName::LuminousEfficiency => {
+            "Fig. 2: photopic V(λ) and scotopic V'(λ) luminous efficiency"
+        }
+        PlotName::Tvi => "Fig. 3: threshold versus intensity of the rod and cone systems",
+        PlotName::SpectralSensitivity => {
+            "Fig. 4: spectral sensitivity at three levels of adaptation"
+        }
+        PlotName::Acuity => "Fig. 7: visual acuity against luminance",
+    }
+}
+
+fn plot_error<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow!("plotting: {e:?}")
+}
+
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, name: PlotName) -> anyhow::Result<()> {
+    root.fill(&WHITE).map_err(plot_error)?;
+    match name {
+        PlotName::LuminousEfficiency => luminous_efficiency(root),
+        PlotName::Tvi => tvi_curves(root),
+        PlotName::SpectralSensitivity => spectral(root),
+        PlotName::Acuity => acuity_curve(root),
+    }
+}
+
+fn line(colour: RGBColor, width: u32) -> ShapeStyle {
+    ShapeStyle {
+        color: colour.to_rgba(),
+        filled: false,
+        stroke_width: width,
+    }
+}
+
+/// Wavelengths 380–780 nm in 1 nm steps.
+fn wavelengths() -> impl Iterator<Item = f64> + Clone {
+    (380..=780).map(f64::from)
+}
+
+/// Fig. 2.
+fn luminous_efficiency<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(title(PlotName::LuminousEfficiency), (FAMILY, 22))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(70)
+        .build_cartesian_2d(380f64..780f64, 0f64..1.05f64)
+        .map_err(plot_error)?;
+    chart
+        .configure_mesh()
+        .x_desc("wavelength λ (nm)")
+        .y_desc("relative luminous efficiency")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.1}"))
+        .label_style((FAMILY, 15))
+        .axis_desc_style((FAMILY, 17))
+        .draw()
+        .map_err(plot_error)?;
+    let curves = [
+        (
+            "scotopic V'(λ), CIE 1951 (rods)",
+            &tables::CIE1951_V_PRIME,
+            RODS,
+        ),
+        (
+            "photopic V(λ), CIE 1924 = ȳ of CIE 1931 (cones)",
+            &tables::CIE1931_Y_BAR,
+            CONES,
+        ),
+    ];
+    for (label, table, colour) in curves {
+        let points = wavelengths().filter_map(|nm| interpolate(table, nm).map(|v| (nm, v)));
+        chart
+            .draw_series(LineSeries::new(points, line(colour, 3)))
+            .map_err(plot_error)?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(colour, 3)));
+    }
+    legend(&mut chart, SeriesLabelPosition::UpperRight)
+}
+
+fn legend<'a, DB: DrawingBackend + 'a, X: Ranged, Y: Ranged>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    position: SeriesLabelPosition,
+) -> anyhow::Result<()> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .label_font((FAMILY, 15))
+        .draw()
+        .map_err(plot_error)
+}
+
+/// Fig. 3.
+fn tvi_curves<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
+    let (lo, hi) = (-6.0, 5.0);
+    let mut chart = ChartBuilder::on(root)
+        .caption(title(PlotName::Tvi), (FAMILY, 22))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(70)
+        .build_cartesian_2d(lo..hi, -3.5f64..5.0f64)
+        .map_err(plot_error)?;
+    chart
+        .configure_mesh()
+        .x_desc("log₁₀ adaptation luminance La (cd/m²; scotopic cd/m² for rods)")
+        .y_desc("log₁₀ threshold ΔL (same units)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .label_style((FAMILY, 15))
+        .axis_desc_style((FAMILY, 17))
+        .draw()
+        .map_err(plot_error)?;
+    let xs = (0..=1100).map(move |i| lo + i as f64 * (hi - lo) / 1100.0);
+    let curves: [(&str, fn(f64) -> f64, RGBColor); 2] = [
+        ("rods, Eq. 5 (scotopic cd/m²)", tvi::log_rod_threshold, RODS),
+        ("cones, Eq. 4 (cd/m²)", tvi::log_cone_threshold, CONES),
+    ];
+    for (label, f, colour) in curves {
+        chart
+            .draw_series(LineSeries::new(
+                xs.clone().map(|x| (x, f(x))),
+                line(colour, 3),
+            ))
+            .map_err(plot_error)?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(colour, 3)));
+    }
+    legend(&mut chart, SeriesLabelPosition::UpperLeft)
+}
+
+/// Fig. 7.
+fn acuity_curve<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
+    let (lo, hi) = (-4.0, 4.0);
+    let mut chart = ChartBuilder::on(root)
+        .caption(title(PlotName::Acuity), (FAMILY, 22))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(70)
+        .build_cartesian_2d(lo..hi, 0f64..60f64)
+        .map_err(plot_error)?;
+    chart
+        .configure_mesh()
+        .x_desc("log₁₀ adaptation luminance (cd/m²)")
+        .y_desc("highest resolvable frequency (cycles/degree)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .label_style((FAMILY, 15))
+        .axis_desc_style((FAMILY, 17))
+        .draw()
+        .map_err(plot_error)?;
+    let xs = (0..=800).map(move |i| lo + i as f64 * (hi - lo) / 800.0);
+    let black = RGBColor(20, 20, 20);
+    chart
+        .draw_series(LineSeries::new(
+            xs.map(|x| (x, acuity::cutoff_cycles_per_degree(10f64.powf(x)))),
+            line(black, 3),
+        ))
+        .map_err(plot_error)?
+        .label("Shaler (1937), fit of Ward Larson et al. (1997)")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(black, 3)));
+    // Snellen equivalents at the paper's two anchors (Sec. 3.4).
+    for x in [3.0f64, -3.3] {
+        let f = acuity::cutoff_cycles_per_degree(10f64.powf(x));
+        let text = format!("{f:.1} c/deg ≈ {}", acuity::snellen(f));
+        chart
+            .draw_series([Circle::new((x, f), 5, ShapeStyle::from(&black).filled())])
+            .map_err(plot_error)?;
+        let (dx, dy) = if x > 0.0 { (-2.3, 4.0) } else { (0.3, -1.0) };
+        chart
+            .draw_series([Text::new(text, (x + dx, f + dy), (FAMILY, 15))])
+            .map_err(plot_error)?;
+    }
+    legend(&mut chart, SeriesLabelPosition::UpperLeft)
+}
+
+/// Fig. 4: three panels.
+fn spectral<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
+    let root = root
+        .titled(title(PlotName::SpectralSensitivity), (FAMILY, 22))
+        .map_err(plot_error)?;
+    let panels = root.split_evenly((1, 3));
+    let levels = [
+        ("(a) scotopic", FIG4_SCOTOPIC_CD_M2),
+        ("(b) mesopic", FIG4_MESOPIC_CD_M2),
+        ("(c) photopic", FIG4_PHOTOPIC_CD_M2),
+    ];
+    // One vertical scale for the three panels, so the loss of absolute sensitivity shows.
+    let mut all = Vec::new();
+    for &(_, level) in &levels {
+        let row: Vec<_> = (400..=700)
+            .map(|nm| spectral_sensitivity(level, f64::from(nm)))
+            .collect::<Result<_, _>>()?;
+        all.push(row);
+    }
+    let top = all
+        .iter()
+        .flatten()
+        .map(|s| s.log_system())
+        .fold(f64::MIN, f64::max)
+        .ceil()
+        + 0.5;
+    let bottom = top - 9.0;
+    for ((panel, (name, level)), row) in panels.iter().zip(levels).zip(&all) {
+        let mut chart = ChartBuilder::on(panel)
+            .caption(format!("{name}, {level} cd/m²"), (FAMILY, 18))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(60)
+            .build_cartesian_2d(400f64..700f64, bottom..top)
+            .map_err(plot_error)?;
+        chart
+            .configure_mesh()
+            .x_desc("wavelength λ (nm)")
+            .y_desc("log₁₀ sensitivity (sr·m²/W)")
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.0}"))
+            .label_style((FAMILY, 13))
+            .axis_desc_style((FAMILY, 15))
+            .draw()
+            .map_err(plot_error)?;
+        let clip = |v: f64| v.max(bottom);
+        let rods: Vec<(f64, f64)> = row
+            .iter()
+            .filter_map(|s| s.log_rod.map(|r| (s.wavelength_nm, clip(r))))
+            .collect();
+        if !rods.is_empty() {
+            chart
+                .draw_series(DashedLineSeries::new(rods, 8, 5, line(RODS, 2)))
+                .map_err(plot_error)?
+                .label("rods (Eq. 5, weighted by k of Eq. 6)")
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(RODS, 2)));
+        }
+        chart
+            .draw_series(DashedLineSeries::new(
+                row.iter().map(|s| (s.wavelength_nm, clip(s.log_cone))),
+                8,
+                5,
+                line(CONES, 2),
+            ))
+            .map_err(plot_error)?
+            .label("cones (Eq. 4)")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(CONES, 2)));
+        let black = RGBColor(20, 20, 20);
+        chart
+            .draw_series(LineSeries::new(
+                row.iter().map(|s| (s.wavelength_nm, clip(s.log_system()))),
+                line(black, 3),
+            ))
+            .map_err(plot_error)?
+            .label("visual system (the more sensitive)")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(black, 3)));
+        legend(&mut chart, SeriesLabelPosition::LowerMiddle)?;
+    }
+    Ok(())
+}
