@@ -18,6 +18,8 @@
 //! | [`blur`] | a Gaussian blur whose cost does not grow with sigma | Sec. 4.1 |
 //! | [`colour`] | RGB primaries, XYZ, sRGB output | Sec. 4 |
 //! | [`operator`] | the whole steady-state operator, with a report | Sec. 4 |
+//! | [`timecourse`] | thresholds over time after the light changes; the Eq. 8–9 mapping | Sec. 3.5, 4.2–4.3, Eq. 8–9, Figs. 8–10 |
+//! | [`sequence`] | image sequences of light and dark adaptation, animated PNG | Sec. 5, Fig. 12 |
 //! | [`chart`] | the paper's test scene: ColorChecker, Snellen chart, gratings, spectral | Sec. 5, Fig. 11 |
 //! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
 //! | [`visibility`] | thresholds per pixel, differences in JNDs, tolerance map, convergence test | Eq. 4–7, Sec. 6 |
@@ -42,7 +44,9 @@ pub mod observer;
 pub mod operator;
 pub mod scale;
 pub mod scotopic;
+pub mod sequence;
 pub mod spectral;
+pub mod timecourse;
 pub mod tvi;
 pub mod visibility;
 
