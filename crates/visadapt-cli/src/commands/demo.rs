@@ -61,9 +61,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
 
     print!("{}", table(&panels));
     println!(
-        "wrote {} panels and {} in {}",
+        "wrote {} panels and contact-sheet.png in {}",
         panels.len(),
-        "contact-sheet.png",
         args.output.display()
     );
     Ok(())

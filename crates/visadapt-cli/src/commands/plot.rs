@@ -180,7 +180,8 @@ fn tvi_curves<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Resu
         .draw()
         .map_err(plot_error)?;
     let xs = (0..=1100).map(move |i| lo + i as f64 * (hi - lo) / 1100.0);
-    let curves: [(&str, fn(f64) -> f64, RGBColor); 2] = [
+    type Curve = (&'static str, fn(f64) -> f64, RGBColor);
+    let curves: [Curve; 2] = [
         ("rods, Eq. 5 (scotopic cd/m²)", tvi::log_rod_threshold, RODS),
         ("cones, Eq. 4 (cd/m²)", tvi::log_cone_threshold, CONES),
     ];

@@ -18,7 +18,9 @@
 //! * Sensitivity is the reciprocal of the threshold radiance, `S = 1/ΔL_e` in sr·m²/W; the
 //!   visual system's sensitivity is that of the more sensitive system.
 //!
-//! At 0.1 cd/m² this puts the rod/cone crossover at 571 nm, the paper's "about 575 nm".
+//! At 0.1 cd/m² this puts the rod/cone crossover at 571 nm, the paper's "about 575 nm". At
+//! 0.001 cd/m² the rods detect everything up to 659 nm, and the cones stay the more
+//! sensitive system in the far red, as in the dark-adapted eye.
 
 use super::{PHOTOPIC_EFFICACY_LM_PER_W, SCOTOPIC_EFFICACY_LM_PER_W, interpolate, tables};
 use crate::mesopic::rod_weight;
