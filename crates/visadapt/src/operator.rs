@@ -408,7 +408,7 @@ pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -
     let DisplayImage { r, g, b, .. } = out;
     let mut stats = par_chunks(r, g, b, |start, r, g, b| map_chunk(image, &c, start, r, g, b));
     if mapping.blur_sigma_px > 0.0 {
-        tmp_blur(
+        crate::blur::gaussian_blur_planes(
             &mut [r.as_mut_slice(), g.as_mut_slice(), b.as_mut_slice()],
             image.width,
             image.height,
@@ -533,4 +533,3 @@ fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelStats {
         ..PixelStats::default()
     }
 }
-fn tmp_blur(_: &mut [&mut [f32]], _: usize, _: usize, _: f32) {}
