@@ -23,6 +23,16 @@ pub enum Command {
     /// What an observer adapted to a luminance can see: thresholds, scale factors, acuity.
     #[command(after_help = OBSERVER_EXAMPLES)]
     Observer(ObserverArgs),
+    /// Thresholds, scale factors, offsets and acuity over time after the world luminance
+    /// changes (Figs. 8-10, Eq. 8-9).
+    #[command(after_help = TIMECOURSE_EXAMPLES)]
+    Timecourse(TimecourseArgs),
+    /// A scene lit at one level, then switched to another: frames over time (Fig. 12).
+    #[command(after_help = SEQUENCE_EXAMPLES)]
+    Sequence(SequenceArgs),
+    /// A stream of numbered HDR frames through the time course of adaptation.
+    #[command(after_help = VIDEO_EXAMPLES)]
+    Video(VideoArgs),
     /// Write the paper's test scene (ColorChecker, Snellen chart, gratings) as an EXR.
     #[command(after_help = CHART_EXAMPLES)]
     Chart(ChartArgs),
@@ -216,4 +226,189 @@ pub enum PlotName {
     /// Fig. 7: highest resolvable grating frequency against luminance.
     #[value(name = "acuity", alias = "fig7")]
     Acuity,
+    /// Figs. 8-10: the time course of light (rods, cones) and dark adaptation.
+    #[value(name = "timecourse", alias = "fig8-10")]
+    Timecourse,
+}
+
+// ---- time course of adaptation (timecourse, sequence, video) ----
+
+const TIMECOURSE_EXAMPLES: &str = "\
+Examples:
+  visadapt timecourse --from 0.1 --to 5623 --times 0,1,10,75      # light adaptation (Fig. 12a)
+  visadapt timecourse --from 1412 --to 0.1 --times 0,60,210,1800 --json
+
+The observer is adapted to --from cd/m² (scotopic luminance 2.261 times the photopic, equal-energy
+white) and meets --to at t = 0. Thresholds follow curves fitted to the paper's Figs. 8-10.";
+
+const SEQUENCE_EXAMPLES: &str = "\
+Examples:
+  visadapt sequence scene.hdr --from 0.1 --to 5623 --times 0,1,4,15,30,75 -o light/ --apng light.png
+  visadapt sequence scene.hdr --from 1412 --to 0.1 --times 0,20,45,90,150,210 -o dark/
+
+Frame 0 (frame_000.png) shows the scene at --from, adapted; frame i the scene at --to, the i-th
+time after the switch. Levels are the scene's highest visible luminance, as with map --peak.";
+
+const VIDEO_EXAMPLES: &str = "\
+Examples:
+  visadapt video 'render/f_%04d.exr' --fps 24 -o out/
+  visadapt video 'frames/shot%d.hdr' --fps 30 --scale 179 --format exr -o mapped/ --json
+
+IN_PATTERN holds one %d or %0Nd (printf style, as ffmpeg); the frames are the files it names, in
+numerical order, consecutive. The observer starts adapted to the first frame. Output frames are
+OUT_DIR/<input name>.<format>, each written as soon as it is done.";
+
+#[derive(Debug, Args)]
+pub struct TimecourseArgs {
+    /// Luminance the observer is adapted to before t = 0, cd/m².
+    #[arg(long, value_name = "L0", allow_negative_numbers = true)]
+    pub from: f64,
+
+    /// Luminance from t = 0 on, cd/m².
+    #[arg(long, value_name = "L1", allow_negative_numbers = true)]
+    pub to: f64,
+
+    /// Times after the change, seconds, comma-separated, sorted.
+    #[arg(long, value_name = "T1,T2,...", value_delimiter = ',', required = true)]
+    #[arg(allow_hyphen_values = true)]
+    pub times: Vec<f64>,
+
+    /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "L",
+        default_value_t = 80.0
+    )]
+    pub display_max: f64,
+
+    /// Print a JSON array (one object per time) instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct SequenceArgs {
+    /// Input HDR image (format detected from its contents).
+    pub input: PathBuf,
+
+    /// Highest visible luminance of the scene before the switch, cd/m².
+    #[arg(long, value_name = "L0", allow_negative_numbers = true)]
+    pub from: f64,
+
+    /// Highest visible luminance after the switch, cd/m².
+    #[arg(long, value_name = "L1", allow_negative_numbers = true)]
+    pub to: f64,
+
+    /// Times after the switch, seconds, comma-separated, sorted; one frame each.
+    #[arg(long, value_name = "T1,T2,...", value_delimiter = ',', required = true)]
+    #[arg(allow_hyphen_values = true)]
+    pub times: Vec<f64>,
+
+    /// Directory for the numbered PNG frames (created if missing).
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+
+    /// Also write all frames as one animated PNG.
+    #[arg(long, value_name = "FILE")]
+    pub apng: Option<PathBuf>,
+
+    /// How long the animated PNG shows each frame, milliseconds.
+    #[arg(long, value_name = "MS", default_value_t = 1000)]
+    pub apng_delay_ms: u16,
+
+    /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "L",
+        default_value_t = 80.0
+    )]
+    pub display_max: f64,
+
+    /// Horizontal field of view of the image in degrees (perspective) [default: the
+    /// file's VIEW, else 60].
+    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
+    pub fov: Option<f64>,
+
+    /// Skip the acuity blur (Eq. 7).
+    #[arg(long)]
+    pub no_acuity: bool,
+
+    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
+    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
+    pub hot_pixel_fraction: f64,
+
+    /// Largest accepted input in pixels (width x height).
+    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
+    pub max_pixels: u64,
+
+    /// Print the list of frames as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Output format of `video` frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum VideoFormat {
+    /// 8-bit sRGB PNG.
+    Png,
+    /// JPEG, quality 90.
+    Jpg,
+    /// Linear display-referred OpenEXR (1.0 = --display-max).
+    Exr,
+}
+
+#[derive(Debug, Args)]
+pub struct VideoArgs {
+    /// Input frames: a path whose file name holds one %d or %0Nd, e.g. frames/f_%04d.exr.
+    #[arg(value_name = "IN_PATTERN")]
+    pub pattern: String,
+
+    /// Frames per second of the input: the time step of the adaptation is 1/F.
+    #[arg(long, value_name = "F", allow_negative_numbers = true)]
+    pub fps: f64,
+
+    /// Output directory (created if missing).
+    #[arg(short, long, value_name = "OUT_DIR")]
+    pub output: PathBuf,
+
+    /// Format of the output frames.
+    #[arg(long, value_enum, default_value_t = VideoFormat::Png)]
+    pub format: VideoFormat,
+
+    /// Multiply every frame's values by S to get cd/m² (one factor for all frames, so the
+    /// changes between frames are kept).
+    #[arg(long, allow_negative_numbers = true, value_name = "S")]
+    pub scale: Option<f64>,
+
+    /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "L",
+        default_value_t = 80.0
+    )]
+    pub display_max: f64,
+
+    /// Horizontal field of view of the frames in degrees (perspective) [default: the
+    /// file's VIEW, else 60].
+    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
+    pub fov: Option<f64>,
+
+    /// Skip the acuity blur (Eq. 7).
+    #[arg(long)]
+    pub no_acuity: bool,
+
+    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
+    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
+    pub hot_pixel_fraction: f64,
+
+    /// Largest accepted frame in pixels (width x height).
+    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
+    pub max_pixels: u64,
+
+    /// Print one JSON object per frame (JSON Lines) on standard output as frames are written.
+    #[arg(long)]
+    pub json: bool,
 }

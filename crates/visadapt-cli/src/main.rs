@@ -40,6 +40,9 @@ fn main() -> ExitCode {
     let result = match cli.command {
         cli::Command::Map(args) => commands::map::run(args),
         cli::Command::Observer(args) => commands::observer::run(args),
+        cli::Command::Timecourse(args) => commands::timecourse::run(args),
+        cli::Command::Sequence(args) => commands::sequence::run(args),
+        cli::Command::Video(args) => commands::video::run(args),
         cli::Command::Chart(args) => commands::chart::run(args),
         cli::Command::Demo(args) => commands::demo::run(args),
         cli::Command::Plot(args) => commands::plot::run(args),

@@ -4,3 +4,6 @@ pub mod demo;
 pub mod map;
 pub mod observer;
 pub mod plot;
+pub mod sequence;
+pub mod timecourse;
+pub mod video;

@@ -9,7 +9,10 @@
 //!   light at scotopic, mesopic and photopic levels, derived from Eq. 4–6 and the
 //!   luminous efficiency functions ([`visadapt::spectral::sensitivity`] explains how);
 //! * `acuity` (Fig. 7): the highest resolvable grating frequency against luminance (the
-//!   Shaler fit of [`visadapt::acuity`]).
+//!   Shaler fit of [`visadapt::acuity`]);
+//! * `timecourse` (Figs. 8–10): the threshold after a change of light, rods (Adelson) and
+//!   cones (Baker) light-adapting, and dark adaptation with its rod–cone break (Hecht)
+//!   ([`visadapt::timecourse::figure_8`] and the two after it).
 
 use crate::cli::{PlotArgs, PlotName};
 use crate::graphics::{self, FAMILY, PictureFormat};
@@ -20,7 +23,7 @@ use visadapt::spectral::sensitivity::{
     FIG4_MESOPIC_CD_M2, FIG4_PHOTOPIC_CD_M2, FIG4_SCOTOPIC_CD_M2, spectral_sensitivity,
 };
 use visadapt::spectral::{interpolate, tables};
-use visadapt::{acuity, tvi};
+use visadapt::{acuity, timecourse, tvi};
 
 /// Colour of the cone (photopic) curves.
 const CONES: RGBColor = RGBColor(200, 40, 30);
@@ -38,7 +41,7 @@ pub fn run(args: PlotArgs) -> anyhow::Result<()> {
 pub fn render(name: PlotName, format: PictureFormat, path: &std::path::Path) -> anyhow::Result<()> {
     graphics::register_font();
     let size = match name {
-        PlotName::SpectralSensitivity => (1500, 560),
+        PlotName::SpectralSensitivity | PlotName::Timecourse => (1500, 560),
         _ => (900, 600),
     };
     match format {
@@ -73,6 +76,7 @@ fn title(name: PlotName) -> &'static str {
             "Fig. 4: spectral sensitivity at three levels of adaptation"
         }
         PlotName::Acuity => "Fig. 7: visual acuity against luminance",
+        PlotName::Timecourse => "Figs. 8-10: the time course of light and dark adaptation",
     }
 }
 
@@ -87,6 +91,7 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, name: PlotName) -> an
         PlotName::Tvi => tvi_curves(root),
         PlotName::SpectralSensitivity => spectral(root),
         PlotName::Acuity => acuity_curve(root),
+        PlotName::Timecourse => timecourse_curves(root),
     }
 }
 
@@ -320,6 +325,77 @@ fn spectral<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result
             .label("visual system (the more sensitive)")
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(black, 3)));
         legend(&mut chart, SeriesLabelPosition::LowerMiddle)?;
+    }
+    Ok(())
+}
+
+/// Figs. 8–10: three panels drawn from the time-course model's figure data.
+fn timecourse_curves<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
+    let root = root
+        .titled(title(PlotName::Timecourse), (FAMILY, 22))
+        .map_err(plot_error)?;
+    let panels = root.split_evenly((1, 3));
+    let figures = [
+        (
+            timecourse::figure_8(),
+            "(a) Fig. 8: rods, dark to 0.5 log cd/m²",
+            "s",
+            1.0,
+        ),
+        (
+            timecourse::figure_9(),
+            "(b) Fig. 9: cones, dark to 3.75 log cd/m²",
+            "min",
+            60.0,
+        ),
+        (
+            timecourse::figure_10(),
+            "(c) Fig. 10: 2.3 log cd/m² to dark",
+            "min",
+            60.0,
+        ),
+    ];
+    let black = RGBColor(20, 20, 20);
+    for (panel, (figure, caption, unit, per_unit)) in panels.iter().zip(figures) {
+        let points = || figure.curves.iter().flat_map(|c| c.points.iter());
+        let t_max = points().map(|p| p.0).fold(0.0, f64::max) / per_unit;
+        let y_lo = points().map(|p| p.1).fold(f64::MAX, f64::min);
+        let y_hi = points().map(|p| p.1).fold(f64::MIN, f64::max);
+        let pad = 0.1 * (y_hi - y_lo).max(0.5);
+        let mut chart = ChartBuilder::on(panel)
+            .caption(caption, (FAMILY, 18))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0f64..t_max, (y_lo - pad)..(y_hi + pad))
+            .map_err(plot_error)?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("time after the change ({unit})"))
+            .y_desc("log₁₀ threshold (cd/m²; scotopic for rods)")
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.1}"))
+            .label_style((FAMILY, 13))
+            .axis_desc_style((FAMILY, 15))
+            .draw()
+            .map_err(plot_error)?;
+        for curve in &figure.curves {
+            let (colour, width) = match curve.label {
+                "rods" => (RODS, 2),
+                "cones" => (CONES, 2),
+                _ => (black, 4),
+            };
+            let style = line(colour, width);
+            chart
+                .draw_series(LineSeries::new(
+                    curve.points.iter().map(|&(t, y)| (t / per_unit, y)),
+                    style,
+                ))
+                .map_err(plot_error)?
+                .label(curve.label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+        }
+        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     }
     Ok(())
 }

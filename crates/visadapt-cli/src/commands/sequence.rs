@@ -1,0 +1,129 @@
+//! `visadapt sequence`: a scene lit at one level, then switched to another, as numbered PNG
+//! frames (and optionally one animated PNG), as in the paper's Fig. 12.
+
+use super::timecourse::{positive, sorted_times};
+use crate::cli::SequenceArgs;
+use anyhow::{Context, bail};
+use std::path::PathBuf;
+use visadapt::io;
+use visadapt::operator::ViewingConditions;
+use visadapt::sequence::{ApngWriter, Sequence, render};
+use visadapt::{Limits, View};
+
+/// File name of frame `index` of `count`: `frame_000.png`, zero-padded to at least 3 digits.
+pub fn frame_name(index: usize, count: usize) -> String {
+    let width = (count.saturating_sub(1)).to_string().len().max(3);
+    format!("frame_{index:0width$}.png")
+}
+
+pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
+    let from = positive("--from", args.from)?;
+    let to = positive("--to", args.to)?;
+    sorted_times(&args.times)?;
+    if let Some(fov) = args.fov
+        && !(fov.is_finite() && fov > 0.0)
+    {
+        bail!("invalid --fov {fov}: must be a positive, finite number");
+    }
+    if args.apng_delay_ms == 0 {
+        bail!("invalid --apng-delay-ms 0: must be at least 1");
+    }
+    let sequence = Sequence::new(from, to, args.times.clone())?;
+    let conditions = ViewingConditions {
+        display_max_cd_m2: args.display_max,
+        hot_pixel_fraction: args.hot_pixel_fraction,
+        acuity: !args.no_acuity,
+        ..ViewingConditions::default()
+    };
+    conditions.validate()?;
+
+    let limits = Limits {
+        max_pixels: args.max_pixels,
+    };
+    let scene = io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
+    let conditions = ViewingConditions {
+        view: args
+            .fov
+            .map(|fov| View::perspective(fov, scene.width, scene.height)),
+        ..conditions
+    };
+    std::fs::create_dir_all(&args.output).with_context(|| {
+        format!(
+            "{}: cannot create the output directory",
+            args.output.display()
+        )
+    })?;
+
+    let count = sequence.frame_count();
+    let mut apng = match &args.apng {
+        Some(path) => Some(
+            ApngWriter::create(
+                path,
+                scene.width,
+                scene.height,
+                count as u32,
+                args.apng_delay_ms,
+            )
+            .with_context(|| path.display().to_string())?,
+        ),
+        None => None,
+    };
+    let mut written: Vec<(PathBuf, Option<f64>, f64, f64)> = Vec::new();
+    // The file an error happened on, to name it in the message.
+    let mut failed: Option<PathBuf> = None;
+    let result = render(&scene, &sequence, &conditions, |frame| {
+        let path = args.output.join(frame_name(frame.index, count));
+        io::write_display(frame.image, &path, io::OutputFormat::Png { bits: 8 })
+            .inspect_err(|_| failed = Some(path.clone()))?;
+        if let (Some(a), Some(apng_path)) = (apng.as_mut(), &args.apng) {
+            a.push(frame.image)
+                .inspect_err(|_| failed = Some(apng_path.clone()))?;
+        }
+        let m = &frame.mapping;
+        let offset = m.photopic_offset_cd_m2 + m.rod_weight * m.scotopic_offset_cd_m2;
+        written.push((path, frame.t_seconds, m.photopic_scale, offset));
+        Ok(())
+    });
+    let named = failed.unwrap_or_else(|| args.input.clone());
+    result.with_context(|| named.display().to_string())?;
+    if let (Some(a), Some(path)) = (apng, &args.apng) {
+        a.finish().with_context(|| path.display().to_string())?;
+    }
+
+    if args.json {
+        let frames: Vec<_> = written
+            .iter()
+            .map(|(p, t, mp, b)| {
+                serde_json::json!({
+                    "file": p.display().to_string(),
+                    "t_seconds": t,
+                    "photopic_scale": mp,
+                    "offset_cd_m2": b,
+                })
+            })
+            .collect();
+        let v = serde_json::json!({
+            "from_cd_m2": from,
+            "to_cd_m2": to,
+            "frames": frames,
+            "apng": args.apng.as_ref().map(|p| p.display().to_string()),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!("scene lit at {from} cd/m², then {to} cd/m² (highest visible luminance)");
+        for (p, t, mp, b) in &written {
+            let when = match t {
+                Some(t) => format!("t = {t} s"),
+                None => "adapted, before the switch".to_string(),
+            };
+            println!(
+                "{:<40} {when:<28} m_p {mp:.4e}  b {b:.4e} cd/m²",
+                p.display().to_string()
+            );
+        }
+        if let Some(p) = &args.apng {
+            println!("animation: {}", p.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,111 @@
+//! `visadapt timecourse`: thresholds, scale factors, offsets and acuity of an observer
+//! adapted to one luminance at given times after it changes to another (Sec. 3.5, Eq. 8–9).
+
+use crate::cli::TimecourseArgs;
+use anyhow::bail;
+use serde_json::{Value, json};
+use visadapt::scotopic::EQUAL_ENERGY_SP_RATIO;
+use visadapt::timecourse::{Moment, course};
+
+/// Check a luminance flag: positive and finite.
+pub fn positive(flag: &str, v: f64) -> anyhow::Result<f64> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!("invalid {flag} {v}: must be a positive, finite luminance in cd/m²");
+    }
+    Ok(v)
+}
+
+/// Check a list of times: finite, non-negative, sorted.
+pub fn sorted_times(times: &[f64]) -> anyhow::Result<()> {
+    let mut prev = 0.0;
+    for &t in times {
+        if !(t.is_finite() && t >= 0.0) {
+            bail!("invalid --times value {t}: times must be finite, non-negative seconds");
+        }
+        if t < prev {
+            bail!("invalid --times: {t} comes after {prev}; times must be sorted");
+        }
+        prev = t;
+    }
+    Ok(())
+}
+
+pub fn run(args: TimecourseArgs) -> anyhow::Result<()> {
+    let from = positive("--from", args.from)?;
+    let to = positive("--to", args.to)?;
+    if !(args.display_max.is_finite() && args.display_max > 0.0) {
+        bail!(
+            "invalid --display-max {}: must be a positive, finite number",
+            args.display_max
+        );
+    }
+    sorted_times(&args.times)?;
+    let sp = EQUAL_ENERGY_SP_RATIO;
+    let moments = course(
+        (from, from * sp),
+        (to, to * sp),
+        &args.times,
+        args.display_max,
+    )?;
+    if args.json {
+        let v: Vec<Value> = moments.iter().map(moment_json).collect();
+        println!("{}", serde_json::to_string_pretty(&Value::Array(v))?);
+    } else {
+        print!("{}", text(from, to, args.display_max, &moments));
+    }
+    Ok(())
+}
+
+/// One moment as a JSON object (keys documented in the README).
+pub fn moment_json(m: &Moment) -> Value {
+    let map = &m.mapping;
+    json!({
+        "t_seconds": m.t_seconds,
+        "cone_threshold_cd_m2": m.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": m.rod_threshold_scotopic_cd_m2,
+        "cone_excess_log": m.cone_excess_log,
+        "rod_excess_log": m.rod_excess_log,
+        "photopic_scale": map.photopic_scale,
+        "scotopic_scale": map.scotopic_scale,
+        "rod_weight": map.rod_weight,
+        "offset_cd_m2": map.photopic_offset_cd_m2 + map.rod_weight * map.scotopic_offset_cd_m2,
+        "photopic_offset_cd_m2": map.photopic_offset_cd_m2,
+        "scotopic_offset_cd_m2": map.scotopic_offset_cd_m2,
+        "acuity_cycles_per_degree": m.acuity_cycles_per_degree,
+    })
+}
+
+fn text(from: f64, to: f64, display_max: f64, moments: &[Moment]) -> String {
+    let mut s = format!(
+        "observer adapted to {from:.4e} cd/m², switched to {to:.4e} cd/m² at t = 0 \
+         (scotopic = photopic x {EQUAL_ENERGY_SP_RATIO}), display {display_max} cd/m²\n\
+         {:>10} {:>11} {:>11} {:>8} {:>8} {:>11} {:>11} {:>6} {:>11} {:>7}\n",
+        "t (s)",
+        "cone thr",
+        "rod thr",
+        "cone ex",
+        "rod ex",
+        "m_p",
+        "m_s",
+        "k",
+        "b (cd/m²)",
+        "c/deg",
+    );
+    for m in moments {
+        let map = &m.mapping;
+        s += &format!(
+            "{:>10.3} {:>11.4e} {:>11.4e} {:>8.3} {:>8.3} {:>11.4e} {:>11.4e} {:>6.3} {:>11.4e} {:>7.2}\n",
+            m.t_seconds,
+            m.cone_threshold_cd_m2,
+            m.rod_threshold_scotopic_cd_m2,
+            m.cone_excess_log,
+            m.rod_excess_log,
+            map.photopic_scale,
+            map.scotopic_scale,
+            map.rod_weight,
+            map.photopic_offset_cd_m2 + map.rod_weight * map.scotopic_offset_cd_m2,
+            m.acuity_cycles_per_degree,
+        );
+    }
+    s
+}

@@ -1,0 +1,305 @@
+//! `visadapt video`: a stream of numbered HDR frames through the time course of adaptation.
+//!
+//! The input is a printf-style pattern with exactly one `%d` (no padding) or `%0Nd`
+//! (zero-padded to N digits), as ffmpeg uses, e.g. `frames/f_%04d.exr`: the frames are the
+//! files of that directory whose names the pattern produces for some number, in numerical
+//! order. They must be consecutive (a gap would make the time step wrong) and all of one
+//! size. Globs are not supported.
+//!
+//! Frame `n` is shown at `n/fps` seconds. The observer starts adapted to the first frame;
+//! for every later frame the adaptation state is stepped by `1/fps` to that frame's world
+//! adaptation (Sec. 4.4: half its highest visible luminance, photopic and scotopic), and
+//! the frame is mapped with the state's Eq. 8–9 mapping. Each output frame is written,
+//! atomically, as soon as it is done, to `OUT_DIR/<input stem>.<format>`. One HDR frame,
+//! one display image and the file buffer are reused, so memory does not grow with the
+//! number of frames. On an error, the frames already written stay.
+
+use crate::cli::{VideoArgs, VideoFormat};
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use visadapt::io::{self, InputFormat, OutputFormat, radiance};
+use visadapt::operator::{self, ViewingConditions};
+use visadapt::timecourse::Adaptation;
+use visadapt::{DisplayImage, HdrImage, Limits, View};
+
+/// A parsed frame pattern: `dir/prefix%0Ndsuffix`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Pattern {
+    dir: PathBuf,
+    prefix: String,
+    suffix: String,
+    /// N of `%0Nd`; 0 for `%d`.
+    width: usize,
+}
+
+impl Pattern {
+    /// Parse a pattern; its file name must hold exactly one `%d` or `%0Nd`.
+    pub fn parse(pattern: &str) -> anyhow::Result<Self> {
+        let path = Path::new(pattern);
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .with_context(|| format!("{pattern}: the pattern has no file name"))?;
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let bad = || {
+            anyhow::anyhow!(
+                "{pattern}: the file name must hold exactly one %d or %0Nd (e.g. f_%04d.exr)"
+            )
+        };
+        let start = name.find('%').ok_or_else(bad)?;
+        let rest = &name[start + 1..];
+        let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+        if !rest[digits.len()..].starts_with('d') {
+            return Err(bad());
+        }
+        let width = if digits.is_empty() {
+            0
+        } else if digits.starts_with('0') && digits.len() > 1 {
+            digits[1..].parse().map_err(|_| bad())?
+        } else {
+            return Err(bad()); // %Nd pads with spaces: not a file-name pattern
+        };
+        let suffix = &rest[digits.len() + 1..];
+        if suffix.contains('%') {
+            return Err(bad());
+        }
+        Ok(Pattern {
+            dir,
+            prefix: name[..start].to_string(),
+            suffix: suffix.to_string(),
+            width,
+        })
+    }
+
+    /// The file name the pattern gives for `n`.
+    pub fn name(&self, n: u64) -> String {
+        format!("{}{:0w$}{}", self.prefix, n, self.suffix, w = self.width)
+    }
+
+    /// The number `name` stands for, if the pattern produces exactly that name.
+    pub fn number(&self, name: &str) -> Option<u64> {
+        let middle = name
+            .strip_prefix(&self.prefix)?
+            .strip_suffix(&self.suffix)?;
+        if middle.is_empty() || !middle.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        let n: u64 = middle.parse().ok()?;
+        (self.name(n) == name).then_some(n)
+    }
+
+    /// The frames: `(number, path)` in order. Errors if none match or numbers are missing.
+    pub fn frames(&self, pattern: &str) -> anyhow::Result<Vec<(u64, PathBuf)>> {
+        let entries = std::fs::read_dir(&self.dir)
+            .with_context(|| format!("{pattern}: cannot list {}", self.dir.display()))?;
+        let mut numbers: Vec<u64> = Vec::new();
+        for e in entries {
+            let e = e.with_context(|| format!("{pattern}: cannot list {}", self.dir.display()))?;
+            if let Some(n) = e.file_name().to_str().and_then(|s| self.number(s)) {
+                numbers.push(n);
+            }
+        }
+        numbers.sort_unstable();
+        let (Some(&first), Some(&last)) = (numbers.first(), numbers.last()) else {
+            bail!("{pattern}: the pattern matches no file");
+        };
+        if let Some(w) = numbers.windows(2).find(|w| w[1] != w[0] + 1) {
+            bail!(
+                "{pattern}: frame {} is missing (frames run from {first} to {last}; they must be consecutive)",
+                w[0] + 1
+            );
+        }
+        Ok(numbers
+            .into_iter()
+            .map(|n| (n, self.dir.join(self.name(n))))
+            .collect())
+    }
+}
+
+pub fn run(args: VideoArgs) -> anyhow::Result<()> {
+    if !(args.fps.is_finite() && args.fps > 0.0) {
+        bail!(
+            "invalid --fps {}: must be a positive, finite number of frames per second",
+            args.fps
+        );
+    }
+    for (name, v) in [("--scale", args.scale), ("--fov", args.fov)] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            bail!("invalid {name} {v}: must be a positive, finite number");
+        }
+    }
+    let conditions = ViewingConditions {
+        display_max_cd_m2: args.display_max,
+        hot_pixel_fraction: args.hot_pixel_fraction,
+        acuity: !args.no_acuity,
+        ..ViewingConditions::default()
+    };
+    conditions.validate()?;
+    let (format, ext) = match args.format {
+        VideoFormat::Png => (OutputFormat::Png { bits: 8 }, "png"),
+        VideoFormat::Jpg => (OutputFormat::Jpeg { quality: 90 }, "jpg"),
+        VideoFormat::Exr => (OutputFormat::Exr, "exr"),
+    };
+    let pattern = Pattern::parse(&args.pattern)?;
+    let frames = pattern.frames(&args.pattern)?;
+    let out_path = |input: &Path| {
+        let stem = input.file_stem().unwrap_or_default();
+        args.output.join(stem).with_extension(ext)
+    };
+    // Never overwrite an input frame (same directory and extension).
+    for (_, input) in &frames {
+        if let (Ok(a), Ok(b)) = (input.canonicalize(), out_path(input).canonicalize())
+            && a == b
+        {
+            bail!("{}: output would overwrite the input frame", b.display());
+        }
+    }
+    std::fs::create_dir_all(&args.output).with_context(|| {
+        format!(
+            "{}: cannot create the output directory",
+            args.output.display()
+        )
+    })?;
+
+    let limits = Limits {
+        max_pixels: args.max_pixels,
+    };
+    let dt = 1.0 / args.fps;
+    let progress = ProgressBar::new(frames.len() as u64).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}").expect("valid template"),
+    );
+    let mut bytes = Vec::new();
+    let mut hdr = HdrImage::zeros(0, 0);
+    let mut display = DisplayImage {
+        width: 0,
+        height: 0,
+        r: Vec::new(),
+        g: Vec::new(),
+        b: Vec::new(),
+        display_max_cd_m2: 0.0,
+    };
+    let mut eye: Option<Adaptation> = None;
+    let mut size = None;
+    let mut warned_units = false;
+    for (k, (n, input)) in frames.iter().enumerate() {
+        let what = || format!("frame {n} ({})", input.display());
+        read_frame(input, &limits, &mut bytes, &mut hdr).with_context(what)?;
+        match size {
+            None => size = Some((hdr.width, hdr.height)),
+            Some((w, h)) if (w, h) != (hdr.width, hdr.height) => {
+                bail!(
+                    "{}: {}x{} differs from the first frame's {w}x{h}",
+                    what(),
+                    hdr.width,
+                    hdr.height
+                )
+            }
+            Some(_) => {}
+        }
+        match args.scale {
+            Some(s) => hdr.scale(s as f32),
+            None if !hdr.absolute_units && !warned_units => {
+                log::warn!(
+                    "{}: the file does not say its units; values are taken as cd/m² (use --scale)",
+                    what()
+                );
+                warned_units = true;
+            }
+            None => {}
+        }
+        let conditions = ViewingConditions {
+            view: args
+                .fov
+                .map(|fov| View::perspective(fov, hdr.width, hdr.height)),
+            ..conditions.clone()
+        };
+        let report = operator::plan(&hdr, &conditions).with_context(what)?;
+        let state = match eye.as_mut() {
+            None => eye.insert(Adaptation::adapted(
+                report.world_adaptation_cd_m2,
+                report.world_adaptation_scotopic_cd_m2,
+            )?),
+            Some(state) => {
+                state.step_to(dt, &report).with_context(what)?;
+                state
+            }
+        };
+        let mapping = state.mapping(&report);
+        operator::apply_into(&hdr, &mapping, &mut display);
+        let out = out_path(input);
+        io::write_display(&display, &out, format).with_context(|| out.display().to_string())?;
+        if args.json {
+            let offset =
+                mapping.photopic_offset_cd_m2 + mapping.rod_weight * mapping.scotopic_offset_cd_m2;
+            let line = serde_json::json!({
+                "frame": n,
+                "t_seconds": k as f64 * dt,
+                "input": input.display().to_string(),
+                "output": out.display().to_string(),
+                "world_adaptation_cd_m2": report.world_adaptation_cd_m2,
+                "world_adaptation_scotopic_cd_m2": report.world_adaptation_scotopic_cd_m2,
+                "cone_threshold_cd_m2": state.cone_threshold_cd_m2(),
+                "rod_threshold_scotopic_cd_m2": state.rod_threshold_scotopic_cd_m2(),
+                "photopic_scale": mapping.photopic_scale,
+                "scotopic_scale": mapping.scotopic_scale,
+                "rod_weight": mapping.rod_weight,
+                "offset_cd_m2": offset,
+                "acuity_cycles_per_degree": state.acuity_cycles_per_degree(),
+            });
+            println!("{line}");
+        }
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+    if !args.json {
+        println!("wrote {} frames to {}", frames.len(), args.output.display());
+    }
+    Ok(())
+}
+
+/// Read one frame into `hdr`, reusing `bytes` and (for Radiance files) `hdr`'s planes.
+fn read_frame(
+    path: &Path,
+    limits: &Limits,
+    bytes: &mut Vec<u8>,
+    hdr: &mut HdrImage,
+) -> anyhow::Result<()> {
+    bytes.clear();
+    std::fs::File::open(path)?.read_to_end(bytes)?;
+    match io::detect(bytes) {
+        Some(InputFormat::Radiance) => radiance::decode_into(bytes, limits, hdr)?,
+        _ => *hdr = io::decode(bytes, limits)?,
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn patterns_match_exactly_what_they_would_print() {
+        let p = Pattern::parse("frames/f_%04d.exr").unwrap();
+        assert_eq!(p.dir, PathBuf::from("frames"));
+        assert_eq!(p.name(7), "f_0007.exr");
+        assert_eq!(p.number("f_0007.exr"), Some(7));
+        assert_eq!(p.number("f_12345.exr"), Some(12345));
+        assert_eq!(p.number("f_007.exr"), None);
+        assert_eq!(p.number("f_0007.hdr"), None);
+        assert_eq!(p.number("f_00a7.exr"), None);
+        let p = Pattern::parse("x%d.hdr").unwrap();
+        assert_eq!(p.dir, PathBuf::from("."));
+        assert_eq!(p.number("x10.hdr"), Some(10));
+        assert_eq!(p.number("x010.hdr"), None);
+        for bad in ["f.exr", "f_%04d_%d.exr", "f_%4d.exr", "f_%s.exr", ""] {
+            assert!(Pattern::parse(bad).is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,576 @@
+//! `visadapt timecourse`, `sequence` and `video`, end to end: outputs, values, bad input.
+
+use assert_cmd::Command;
+use predicates::prelude::*;
+use std::path::{Path, PathBuf};
+use visadapt::HdrImage;
+
+fn visadapt() -> Command {
+    Command::cargo_bin("visadapt").unwrap()
+}
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../visadapt/tests/data")
+        .join(name)
+}
+
+/// Eq. 4, written out independently of the library.
+fn tp(l: f64) -> f64 {
+    let x = l.log10();
+    10f64.powf(if x <= -2.6 {
+        -0.72
+    } else if x >= 1.9 {
+        x - 1.255
+    } else {
+        (0.249 * x + 0.65).powf(2.7) - 0.72
+    })
+}
+
+fn json(out: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(out).expect("stdout is one JSON value")
+}
+
+fn one_line_error(stderr: &[u8]) -> String {
+    let s = String::from_utf8_lossy(stderr).into_owned();
+    assert_eq!(s.trim_end().lines().count(), 1, "not one line: {s:?}");
+    assert!(!s.contains("panicked"), "{s}");
+    s
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// Decoded RGB8 pixels of a (first frame of a) PNG, and its APNG frame count if animated.
+fn png_pixels(path: &Path) -> (Vec<u8>, Option<u32>) {
+    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = dec.read_info().unwrap();
+    let frames = reader.info().animation_control.map(|a| a.num_frames);
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(info.buffer_size());
+    (buf, frames)
+}
+
+fn f(v: &serde_json::Value, key: &str) -> f64 {
+    v[key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{key} missing or not a number in {v}"))
+}
+
+#[test]
+fn timecourse_json_has_the_documented_keys_and_the_model_values() {
+    let out = visadapt()
+        .args([
+            "timecourse",
+            "--from",
+            "0.1",
+            "--to",
+            "5623",
+            "--times",
+            "0,1,10,75,100000",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json(&out.stdout);
+    let rows = v.as_array().unwrap();
+    assert_eq!(rows.len(), 5);
+    for row in rows {
+        for key in [
+            "t_seconds",
+            "cone_threshold_cd_m2",
+            "rod_threshold_scotopic_cd_m2",
+            "photopic_scale",
+            "scotopic_scale",
+            "rod_weight",
+            "offset_cd_m2",
+            "acuity_cycles_per_degree",
+        ] {
+            assert!(f(row, key).is_finite(), "{key}");
+        }
+    }
+    let (first, last) = (&rows[0], &rows[4]);
+    assert_eq!(f(first, "t_seconds"), 0.0);
+    // Adapted at the end: Eq. 4 at 5623 cd/m², Eq. 3 scale factor, no offset.
+    assert!((f(last, "cone_threshold_cd_m2") / tp(5623.0) - 1.0).abs() < 1e-9);
+    assert!((f(last, "photopic_scale") / (tp(40.0) / tp(5623.0)) - 1.0).abs() < 1e-9);
+    assert_eq!(f(last, "offset_cd_m2"), 0.0);
+    assert_eq!(f(last, "rod_weight"), 0.0);
+    // At the switch: the threshold is raised (Baker's onset, ~0.44 log units), the display
+    // is lifted by the Eq. 8 offset and acuity is reduced; both recover over the 75 s.
+    assert!(f(first, "cone_threshold_cd_m2") > 2.5 * tp(5623.0));
+    assert!(f(first, "offset_cd_m2") > 20.0);
+    let b: Vec<f64> = rows.iter().map(|r| f(r, "offset_cd_m2")).collect();
+    assert!(b[0] > b[1] && b[1] > b[2] && b[2] > b[3].abs(), "{b:?}");
+    let ac: Vec<f64> = rows
+        .iter()
+        .map(|r| f(r, "acuity_cycles_per_degree"))
+        .collect();
+    assert!(ac[0] < ac[1] && ac[1] < ac[2] && ac[2] < ac[3], "{ac:?}");
+    // Eq. 9: m_p·L_wa + b is the same at every time (rod weight is 0 here).
+    let shown: Vec<f64> = rows
+        .iter()
+        .map(|r| f(r, "photopic_scale") * 5623.0 + f(r, "offset_cd_m2"))
+        .collect();
+    for s in &shown {
+        assert!((s / shown[4] - 1.0).abs() < 1e-9, "{shown:?}");
+    }
+}
+
+#[test]
+fn timecourse_dark_adaptation_goes_down_monotonically_and_prints_a_table() {
+    let out = visadapt()
+        .args([
+            "timecourse",
+            "--from",
+            "1412",
+            "--to",
+            "0.1",
+            "--times",
+            "0,30,60,210,600,1800",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v = json(&out.stdout);
+    let rows = v.as_array().unwrap();
+    let cone: Vec<f64> = rows.iter().map(|r| f(r, "cone_threshold_cd_m2")).collect();
+    let rod: Vec<f64> = rows
+        .iter()
+        .map(|r| f(r, "rod_threshold_scotopic_cd_m2"))
+        .collect();
+    assert!(cone.windows(2).all(|w| w[1] < w[0]) && rod.windows(2).all(|w| w[1] < w[0]));
+    // Starts at Eq. 4 of the old level (no jump on a dark step) and nothing is resolvable.
+    assert!((cone[0] / tp(1412.0) - 1.0).abs() < 1e-9);
+    assert_eq!(f(&rows[0], "acuity_cycles_per_degree"), 0.0);
+    // Text: a header and one row per time.
+    visadapt()
+        .args([
+            "timecourse",
+            "--from",
+            "1412",
+            "--to",
+            "0.1",
+            "--times",
+            "0,30,60",
+        ])
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("cone thr").and(predicate::str::contains("    60.000")));
+}
+
+#[test]
+fn timecourse_refuses_bad_input_in_one_line() {
+    for (args, needle) in [
+        (vec!["--from", "1", "--to", "2", "--times", "3,1"], "sorted"),
+        (vec!["--from", "1", "--to", "2", "--times", "-3"], "--times"),
+        (
+            vec!["--from", "1", "--to", "2", "--times", "NaN"],
+            "--times",
+        ),
+        (vec!["--from", "NaN", "--to", "2", "--times", "1"], "--from"),
+        (vec!["--from", "1", "--to", "0", "--times", "1"], "--to"),
+        (vec!["--from", "-1", "--to", "2", "--times", "1"], "--from"),
+        (
+            vec![
+                "--from",
+                "1",
+                "--to",
+                "2",
+                "--times",
+                "1",
+                "--display-max",
+                "0",
+            ],
+            "--display-max",
+        ),
+    ] {
+        let out = visadapt().arg("timecourse").args(&args).output().unwrap();
+        assert!(!out.status.success(), "{args:?}");
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains(needle), "{args:?}: {e}");
+        assert!(out.stdout.is_empty());
+    }
+}
+
+#[test]
+fn sequence_writes_numbered_frames_and_an_animation() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    let apng = dir.path().join("anim.png");
+    let out = visadapt()
+        .arg("sequence")
+        .arg(data("mixtex.hdr"))
+        .args([
+            "--from", "0.1", "--to", "5623", "--times", "0,1,75", "--json", "-o",
+        ])
+        .arg(&frames)
+        .arg("--apng")
+        .arg(&apng)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        files_in(&frames),
+        [
+            "frame_000.png",
+            "frame_001.png",
+            "frame_002.png",
+            "frame_003.png"
+        ]
+    );
+    let v = json(&out.stdout);
+    let list = v["frames"].as_array().unwrap();
+    assert_eq!(list.len(), 4);
+    assert!(list[0]["t_seconds"].is_null());
+    assert_eq!(list[3]["t_seconds"].as_f64(), Some(75.0));
+    // The washed-out frame right after the switch has a large offset, then it shrinks.
+    let b: Vec<f64> = list.iter().map(|x| f(x, "offset_cd_m2")).collect();
+    assert_eq!(b[0], 0.0);
+    assert!(
+        b[1] > 10.0 && b[2] < b[1] && b[3].abs() < 0.2 * b[1],
+        "{b:?}"
+    );
+    // Frame 0 is exactly what `map --peak 0.1` shows.
+    let mapped = dir.path().join("map.png");
+    visadapt()
+        .arg("map")
+        .arg(data("mixtex.hdr"))
+        .args(["--peak", "0.1", "-o"])
+        .arg(&mapped)
+        .assert()
+        .success();
+    assert_eq!(
+        png_pixels(&frames.join("frame_000.png")).0,
+        png_pixels(&mapped).0
+    );
+    // The animation holds the four frames, the first one being frame 0.
+    let (first, n) = png_pixels(&apng);
+    assert_eq!(n, Some(4));
+    assert_eq!(first, png_pixels(&frames.join("frame_000.png")).0);
+}
+
+#[test]
+fn sequence_refuses_bad_input_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let outdir = dir.path().join("o");
+    for (args, needle) in [
+        (
+            vec!["--from", "0.1", "--to", "10", "--times", "5,1"],
+            "sorted",
+        ),
+        (vec!["--from", "0", "--to", "10", "--times", "1"], "--from"),
+        (vec!["--from", "0.1", "--to", "inf", "--times", "1"], "--to"),
+        (
+            vec!["--from", "0.1", "--to", "10", "--times", "-1,2"],
+            "--times",
+        ),
+    ] {
+        let out = visadapt()
+            .arg("sequence")
+            .arg(data("mixtex.hdr"))
+            .args(&args)
+            .arg("-o")
+            .arg(&outdir)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains(needle), "{e}");
+        assert!(!outdir.exists());
+    }
+    let out = visadapt()
+        .args([
+            "sequence",
+            "no-such-file.hdr",
+            "--from",
+            "1",
+            "--to",
+            "2",
+            "--times",
+            "0",
+            "-o",
+        ])
+        .arg(&outdir)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(one_line_error(&out.stderr).contains("no-such-file.hdr"));
+}
+
+/// A small textured scene with highest visible luminance `peak` (cd/m²), `w`×`h`.
+fn scene(w: usize, h: usize, peak: f32) -> HdrImage {
+    let mut im = HdrImage::zeros(w, h);
+    for j in 0..h {
+        for i in 0..w {
+            let k = j * w + i;
+            let l = peak
+                * if (i + j) % 2 == 0 { 1.0 } else { 0.25 }
+                * (0.5 + 0.5 * i as f32 / w as f32);
+            (im.x[k], im.y[k], im.z[k]) = (0.950_47 * l, l, 1.088_83 * l);
+        }
+    }
+    im.absolute_units = true;
+    im
+}
+
+fn write_exr(path: &Path, im: &HdrImage) {
+    let mut f = std::fs::File::create(path).unwrap();
+    visadapt::io::exr::write_hdr(im, &mut f).unwrap();
+}
+
+fn json_lines(out: &[u8]) -> Vec<serde_json::Value> {
+    String::from_utf8_lossy(out)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+#[test]
+fn video_carries_the_adaptation_from_frame_to_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in");
+    std::fs::create_dir(&input).unwrap();
+    // Three dim frames, then the lights go up to 1000 cd/m² for three frames.
+    for n in 0..6 {
+        let peak = if n < 3 { 0.1 } else { 1000.0 };
+        write_exr(&input.join(format!("f_{n:04}.exr")), &scene(16, 8, peak));
+    }
+    std::fs::write(input.join("notes.txt"), "not a frame").unwrap();
+    let outdir = dir.path().join("out");
+    let pattern = input.join("f_%04d.exr");
+    let out = visadapt()
+        .arg("video")
+        .arg(&pattern)
+        .args(["--fps", "0.5", "--json", "--no-acuity", "-o"])
+        .arg(&outdir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let frames = json_lines(&out.stdout);
+    assert_eq!(frames.len(), 6);
+    assert_eq!(
+        files_in(&outdir),
+        [
+            "f_0000.png",
+            "f_0001.png",
+            "f_0002.png",
+            "f_0003.png",
+            "f_0004.png",
+            "f_0005.png"
+        ]
+    );
+    let t: Vec<f64> = frames.iter().map(|v| f(v, "t_seconds")).collect();
+    assert_eq!(t, [0.0, 2.0, 4.0, 6.0, 8.0, 10.0]);
+    // World adaptation from each frame (half its highest luminance), the observer adapted
+    // at first.
+    let half_max = |peak| 0.5 * scene(16, 8, peak).y.iter().fold(0.0f32, |a, &b| a.max(b)) as f64;
+    assert!((f(&frames[0], "world_adaptation_cd_m2") / half_max(0.1) - 1.0).abs() < 1e-6);
+    assert!((f(&frames[5], "world_adaptation_cd_m2") / half_max(1000.0) - 1.0).abs() < 1e-6);
+    let lwa = f(&frames[5], "world_adaptation_cd_m2");
+    assert_eq!(f(&frames[0], "offset_cd_m2"), 0.0);
+    assert_eq!(f(&frames[2], "offset_cd_m2"), 0.0);
+    // The switch: raised threshold, a large offset, recovering over the next frames.
+    let cone: Vec<f64> = frames[3..]
+        .iter()
+        .map(|v| f(v, "cone_threshold_cd_m2"))
+        .collect();
+    assert!(
+        cone[0] > 1.5 * tp(lwa) && cone[0] > cone[1] && cone[1] > cone[2] && cone[2] > tp(lwa),
+        "{cone:?}"
+    );
+    let b: Vec<f64> = frames[3..].iter().map(|v| f(v, "offset_cd_m2")).collect();
+    assert!(b[0] > 10.0 && b[0] > b[1] && b[1] > b[2], "{b:?}");
+    // The first frame is the static operator's output.
+    let mapped = dir.path().join("map.png");
+    visadapt()
+        .arg("map")
+        .arg(input.join("f_0000.exr"))
+        .args(["--no-acuity", "-o"])
+        .arg(&mapped)
+        .assert()
+        .success();
+    assert_eq!(
+        png_pixels(&outdir.join("f_0000.png")).0,
+        png_pixels(&mapped).0
+    );
+}
+
+#[test]
+fn video_reads_pfm_and_radiance_frames_with_a_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    for n in 1..=3 {
+        std::fs::write(
+            dir.path().join(format!("p{n}.pfm")),
+            visadapt::io::pfm::encode(&scene(8, 4, 1.0)),
+        )
+        .unwrap();
+        std::fs::copy(data("mixtex.hdr"), dir.path().join(format!("r{n}.hdr"))).unwrap();
+    }
+    let out = visadapt()
+        .arg("video")
+        .arg(dir.path().join("p%d.pfm"))
+        .args([
+            "--fps", "24", "--scale", "100", "--format", "exr", "--json", "-o",
+        ])
+        .arg(dir.path().join("o"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let frames = json_lines(&out.stdout);
+    let max = scene(8, 4, 1.0).y.iter().fold(0.0f32, |a, &b| a.max(b)) as f64;
+    assert!((f(&frames[2], "world_adaptation_cd_m2") / (50.0 * max) - 1.0).abs() < 1e-4);
+    assert_eq!(
+        files_in(&dir.path().join("o")),
+        ["p1.exr", "p2.exr", "p3.exr"]
+    );
+    visadapt()
+        .arg("video")
+        .arg(dir.path().join("r%d.hdr"))
+        .args(["--fps", "24", "-o"])
+        .arg(dir.path().join("r"))
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("wrote 3 frames"));
+}
+
+#[test]
+fn video_refuses_bad_patterns_and_frame_rates_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    for n in [0, 1, 3] {
+        write_exr(&dir.path().join(format!("g{n}.exr")), &scene(4, 4, 1.0));
+    }
+    let outdir = dir.path().join("out");
+    for (pattern, fps, needle) in [
+        ("none_%03d.exr", "24", "matches no file"),
+        ("g.exr", "24", "%d"),
+        ("g%d.exr", "24", "frame 2 is missing"),
+        ("g%d.exr", "0", "--fps"),
+        ("g%d.exr", "nan", "--fps"),
+    ] {
+        let out = visadapt()
+            .arg("video")
+            .arg(dir.path().join(pattern))
+            .args(["--fps", fps, "-o"])
+            .arg(&outdir)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{pattern}");
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains(needle), "{pattern}: {e}");
+        assert!(!outdir.exists(), "{pattern}");
+    }
+}
+
+#[test]
+fn video_stops_at_a_frame_of_another_size_and_keeps_what_it_wrote() {
+    let dir = tempfile::tempdir().unwrap();
+    write_exr(&dir.path().join("v1.exr"), &scene(8, 4, 10.0));
+    write_exr(&dir.path().join("v2.exr"), &scene(8, 4, 20.0));
+    write_exr(&dir.path().join("v3.exr"), &scene(4, 4, 20.0));
+    write_exr(&dir.path().join("v4.exr"), &scene(8, 4, 20.0));
+    let outdir = dir.path().join("out");
+    let out = visadapt()
+        .arg("video")
+        .arg(dir.path().join("v%d.exr"))
+        .args(["--fps", "30", "-o"])
+        .arg(&outdir)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let e = one_line_error(&out.stderr);
+    assert!(
+        e.contains("frame 3") && e.contains("4x4") && e.contains("8x4"),
+        "{e}"
+    );
+    // The two good frames are there, whole, and nothing else (no temporary files).
+    assert_eq!(files_in(&outdir), ["v1.png", "v2.png"]);
+    for name in ["v1.png", "v2.png"] {
+        assert_eq!(png_pixels(&outdir.join(name)).0.len(), 8 * 4 * 3);
+    }
+    // A corrupt frame: the same, naming it.
+    std::fs::write(dir.path().join("v3.exr"), b"v/1\x01 truncated").unwrap();
+    std::fs::remove_dir_all(&outdir).unwrap();
+    let out = visadapt()
+        .arg("video")
+        .arg(dir.path().join("v%d.exr"))
+        .args(["--fps", "30", "-o"])
+        .arg(&outdir)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(one_line_error(&out.stderr).contains("v3.exr"));
+    assert_eq!(files_in(&outdir), ["v1.png", "v2.png"]);
+}
+
+#[test]
+fn video_never_overwrites_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    write_exr(&dir.path().join("w1.exr"), &scene(4, 4, 1.0));
+    let before = std::fs::read(dir.path().join("w1.exr")).unwrap();
+    let out = visadapt()
+        .arg("video")
+        .arg(dir.path().join("w%d.exr"))
+        .args(["--fps", "30", "--format", "exr", "-o"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(one_line_error(&out.stderr).contains("overwrite"));
+    assert_eq!(std::fs::read(dir.path().join("w1.exr")).unwrap(), before);
+}
+
+#[test]
+fn plot_draws_figures_8_to_10_as_svg_and_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = dir.path().join("tc.svg");
+    visadapt()
+        .args(["plot", "timecourse", "-o"])
+        .arg(&svg)
+        .assert()
+        .success();
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for needle in [
+        "Fig. 8",
+        "Fig. 9",
+        "Fig. 10",
+        "threshold (envelope)",
+        "<polyline",
+    ] {
+        assert!(text.contains(needle), "{needle}");
+    }
+    let png = dir.path().join("tc.png");
+    visadapt()
+        .args(["plot", "fig8-10", "-o"])
+        .arg(&png)
+        .assert()
+        .success();
+    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let info = dec.read_info().unwrap();
+    assert_eq!((info.info().width, info.info().height), (1500, 560));
+}
