@@ -419,7 +419,7 @@ pub fn difference(reference: &HdrImage, test: &HdrImage, viewer: &Viewer) -> Res
         bad
     });
     if viewer.acuity_sigma_px > 0.0 {
-        acuity_blur(
+        crate::blur::gaussian_blur_planes(
             &mut [dy.as_mut_slice(), dv.as_mut_slice()],
             width,
             height,
@@ -588,50 +588,6 @@ fn par_chunks2(
     }
 }
 
-/// The acuity Gaussian of Eq. 7 on flat planes.
-///
-/// A direct separable convolution (4 sigma each side, edges repeated), standing in until
-/// `blur::gaussian_blur_planes`, whose cost does not grow with sigma, lands.
-fn acuity_blur(planes: &mut [&mut [f32]], width: usize, height: usize, sigma_px: f32) {
-    let radius = ((4.0 * sigma_px).ceil() as usize).min(width.max(height));
-    let mut weights: Vec<f32> = (0..=2 * radius)
-        .map(|k| {
-            let x = k as f32 - radius as f32;
-            (-x * x / (2.0 * sigma_px * sigma_px)).exp()
-        })
-        .collect();
-    let total: f32 = weights.iter().sum();
-    weights.iter_mut().for_each(|w| *w /= total);
-    let clamp = |i: isize, n: usize| i.clamp(0, n as isize - 1) as usize;
-    for plane in planes.iter_mut() {
-        let src = plane.to_vec();
-        // Horizontal pass into `tmp`, vertical pass back into the plane.
-        let mut tmp = vec![0f32; src.len()];
-        for (row_in, row_out) in src.chunks_exact(width).zip(tmp.chunks_exact_mut(width)) {
-            for (x, o) in row_out.iter_mut().enumerate() {
-                *o = weights
-                    .iter()
-                    .enumerate()
-                    .map(|(k, w)| {
-                        w * row_in[clamp(x as isize + k as isize - radius as isize, width)]
-                    })
-                    .sum();
-            }
-        }
-        for (y, row_out) in plane.chunks_exact_mut(width).enumerate() {
-            row_out.fill(0.0);
-            for (k, w) in weights.iter().enumerate() {
-                let yy = clamp(y as isize + k as isize - radius as isize, height);
-                let row_in = &tmp[yy * width..(yy + 1) * width];
-                row_out
-                    .iter_mut()
-                    .zip(row_in)
-                    .for_each(|(o, v)| *o += w * v);
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -708,18 +664,5 @@ mod tests {
             adaptation_scotopic_cd_m2: &nan,
         };
         assert!(local.validate(3).is_err());
-    }
-
-    #[test]
-    fn fir_blur_keeps_constants_and_unit_sum() {
-        let (w, h) = (31, 21);
-        let mut a = vec![3.0f32; w * h];
-        let mut b = vec![0.0f32; w * h];
-        b[10 * w + 15] = 1.0;
-        acuity_blur(&mut [a.as_mut_slice(), b.as_mut_slice()], w, h, 1.3);
-        assert!(a.iter().all(|v| (v - 3.0).abs() < 1e-5));
-        let s: f32 = b.iter().sum();
-        assert!((s - 1.0).abs() < 1e-5, "{s}");
-        assert!(b[10 * w + 15] < 0.2 && b[10 * w + 16] > 0.05);
     }
 }
