@@ -160,7 +160,11 @@ do not record the view: map them with the --fov that `chart` prints.";
 const DEMO_EXAMPLES: &str = "\
 Examples:
   visadapt demo                       # writes visadapt-demo/
-  visadapt demo -o out --levels 100,1,0.01";
+  visadapt demo -o out --levels 100,1,0.01 --no-sequences
+
+Writes panel-L.png per level, contact-sheet.png, and the paper's Fig. 12 sequences on the
+same scene: fig12a-N.png / fig12a.apng (light adaptation, 0.1 -> 5623 cd/m²) and
+fig12b-N.png / fig12b.apng (dark adaptation, 1412 -> 0.1 cd/m²).";
 
 const PLOT_EXAMPLES: &str = "\
 Examples:
@@ -198,6 +202,10 @@ pub struct DemoArgs {
     #[arg(long, value_name = "L,...", value_delimiter = ',', allow_negative_numbers = true,
           default_values_t = [1000.0, 10.0, 0.04, 0.001])]
     pub levels: Vec<f64>,
+
+    /// Skip the Fig. 12 light- and dark-adaptation sequences.
+    #[arg(long)]
+    pub no_sequences: bool,
 }
 
 #[derive(Debug, Args)]

@@ -41,16 +41,20 @@ fn demo_writes_four_panels_a_contact_sheet_and_a_table() {
     let out = dir.path().join("demo");
     let run = visadapt().args(["demo", "-o"]).arg(&out).assert().success();
     let stdout = String::from_utf8_lossy(&run.get_output().stdout).into_owned();
-    assert_eq!(
-        files_in(&out),
-        [
-            "contact-sheet.png",
-            "panel-0.001.png",
-            "panel-0.04.png",
-            "panel-10.png",
-            "panel-1000.png"
-        ]
-    );
+    let mut expected = vec![
+        "contact-sheet.png".to_string(),
+        "panel-0.001.png".to_string(),
+        "panel-0.04.png".to_string(),
+        "panel-10.png".to_string(),
+        "panel-1000.png".to_string(),
+    ];
+    // The paper's Fig. 12 sequences: 7 frames each (adapted + 6 times) and an animation.
+    for seq in ["fig12a", "fig12b"] {
+        expected.push(format!("{seq}.apng"));
+        expected.extend((0..7).map(|i| format!("{seq}-{i}.png")));
+    }
+    expected.sort();
+    assert_eq!(files_in(&out), expected);
     // The table: one row per level with its acuity and colour state, measured.
     for row in [
         "1000 ",
@@ -84,6 +88,26 @@ fn demo_writes_four_panels_a_contact_sheet_and_a_table() {
     .collect();
     assert!(m.windows(2).all(|w| w[1] < w[0]), "{m:?}");
     assert!(m[3] > 10.0, "{m:?}");
+    // Light adaptation (Fig. 12a): the frame just after the switch to 5623 cd/m² is washed
+    // out (brighter, less contrast) compared with the last frame, 75 s later.
+    let (_, _, first) = read_png(&out.join("fig12a-1.png"));
+    let (_, _, last) = read_png(&out.join("fig12a-6.png"));
+    let spread = |rgb: &[u8]| {
+        let (lo, hi) = rgb
+            .iter()
+            .fold((255u8, 0u8), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        hi as i32 - lo as i32
+    };
+    assert!(
+        spread(&first) < spread(&last),
+        "{} vs {}",
+        spread(&first),
+        spread(&last)
+    );
+    assert!(
+        stdout.contains("fig12a.apng") && stdout.contains("fig12b.apng"),
+        "{stdout}"
+    );
     // The contact sheet holds the four panels (2 x 2) and their labels.
     let (pw, ph, _) = read_png(&out.join("panel-1000.png"));
     let (w, h, sheet) = read_png(&out.join("contact-sheet.png"));
@@ -101,7 +125,7 @@ fn demo_levels_can_be_chosen_and_bad_levels_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("d");
     visadapt()
-        .args(["demo", "--levels", "50", "-o"])
+        .args(["demo", "--levels", "50", "--no-sequences", "-o"])
         .arg(&out)
         .assert()
         .success()

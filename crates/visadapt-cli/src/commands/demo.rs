@@ -12,6 +12,7 @@ use std::path::Path;
 use visadapt::chart::{BLUE_PATCH, Chart, ChartOptions, RED_PATCH, Readings};
 use visadapt::io::{self, OutputFormat};
 use visadapt::operator::{self, Report, ViewingConditions};
+use visadapt::sequence::{self, ApngWriter, Sequence};
 
 /// One rendered level.
 struct Panel {
@@ -42,7 +43,16 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         )
     })?;
 
-    let progress = ProgressBar::new(args.levels.len() as u64 + 1).with_style(
+    let sequences = if args.no_sequences {
+        Vec::new()
+    } else {
+        vec![
+            ("fig12a", "light adaptation", Sequence::figure_12a()),
+            ("fig12b", "dark adaptation", Sequence::figure_12b()),
+        ]
+    };
+    let frames: usize = sequences.iter().map(|s| s.2.frame_count()).sum();
+    let progress = ProgressBar::new((args.levels.len() + 1 + frames) as u64).with_style(
         ProgressStyle::with_template("{spinner} [{bar:20}] {pos}/{len} {msg}")
             .expect("valid template"),
     );
@@ -57,6 +67,29 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let sheet = args.output.join("contact-sheet.png");
     contact_sheet(&panels, &sheet)?;
     progress.inc(1);
+    let mut written = Vec::new();
+    if !sequences.is_empty() {
+        // The scene at any level: each sequence rescales it so its white is at the level.
+        let chart = Chart::new(&ChartOptions::default())?;
+        for (name, what, seq) in &sequences {
+            progress.set_message(format!(
+                "{what}: {} to {} cd/m²",
+                seq.from_cd_m2, seq.to_cd_m2
+            ));
+            render_sequence(&chart, name, seq, &args.output, &progress)?;
+            written.push(format!(
+                "  {what} (Fig. 12): {} -> {} cd/m², frames {name}-0.png (adapted) to {name}-{}.png at {} s, animated {name}.apng",
+                seq.from_cd_m2,
+                seq.to_cd_m2,
+                seq.times_seconds.len(),
+                seq.times_seconds
+                    .iter()
+                    .map(|t| format!("{t}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+    }
     progress.finish_and_clear();
 
     print!("{}", table(&panels));
@@ -65,7 +98,42 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         panels.len(),
         args.output.display()
     );
+    for line in &written {
+        println!("{line}");
+    }
     Ok(())
+}
+
+/// Frame delay of the demo's animated sequences, ms.
+const SEQUENCE_FRAME_MS: u16 = 700;
+
+/// Render one of the paper's Fig. 12 sequences on the built-in scene: numbered PNG frames
+/// and an animated PNG, through [`visadapt::sequence::render`].
+fn render_sequence(
+    chart: &Chart,
+    name: &str,
+    seq: &Sequence,
+    dir: &Path,
+    progress: &ProgressBar,
+) -> anyhow::Result<()> {
+    let path = dir.join(format!("{name}.apng"));
+    let mut apng = ApngWriter::create(
+        &path,
+        chart.image.width,
+        chart.image.height,
+        seq.frame_count() as u32,
+        SEQUENCE_FRAME_MS,
+    )
+    .with_context(|| path.display().to_string())?;
+    sequence::render(&chart.image, seq, &ViewingConditions::default(), |f| {
+        let frame = dir.join(format!("{name}-{}.png", f.index));
+        io::write_display(f.image, &frame, OutputFormat::Png { bits: 8 })?;
+        apng.push(f.image)?;
+        progress.inc(1);
+        Ok(())
+    })
+    .with_context(|| format!("{name}: {}", dir.display()))?;
+    apng.finish().with_context(|| path.display().to_string())
 }
 
 /// The panel's file name, e.g. `panel-0.04.png`.
