@@ -406,16 +406,24 @@ pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -
         plane.resize(n, 0.0);
     }
     let DisplayImage { r, g, b, .. } = out;
-    let mut stats = par_chunks(r, g, b, |start, r, g, b| map_chunk(image, &c, start, r, g, b));
-    if mapping.blur_sigma_px > 0.0 {
+    let blur = mapping.blur_sigma_px > 0.0;
+    // Without a blur the clipping is done in the same pass (one trip through memory).
+    let mut stats = par_chunks(r, g, b, |start, r, g, b| {
+        let mut s = map_chunk(image, &c, start, r, g, b);
+        if !blur {
+            s.clipped = clip_chunk(r, g, b).clipped;
+        }
+        s
+    });
+    if blur {
         crate::blur::gaussian_blur_planes(
             &mut [r.as_mut_slice(), g.as_mut_slice(), b.as_mut_slice()],
             image.width,
             image.height,
             mapping.blur_sigma_px as f32,
         );
+        stats.clipped = par_chunks(r, g, b, |_, r, g, b| clip_chunk(r, g, b)).clipped;
     }
-    stats.clipped = par_chunks(r, g, b, |_, r, g, b| clip_chunk(r, g, b)).clipped;
     stats
 }
 
@@ -454,6 +462,7 @@ fn par_chunks(
     }
 }
 
+#[inline(always)]
 fn map_chunk(
     image: &HdrImage,
     c: &Coefficients,
@@ -518,6 +527,7 @@ impl Coefficients {
     }
 }
 
+#[inline(always)]
 fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelStats {
     let mut clipped = 0u32;
     for ((r, g), b) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
