@@ -15,7 +15,8 @@
 //! * from an image by the paper's rule (Sec. 4.4, half the highest visible luminance):
 //!   [`Viewer::for_image`], or from an [`operator::plan`] report: [`Viewer::from_report`];
 //! * from given adaptation luminances: [`Viewer::steady_state`];
-//! * from a time-varying adaptation state: fill a [`Sensitivity`] with its thresholds;
+//! * from a time-varying adaptation state ([`crate::timecourse::Adaptation`]):
+//!   [`Sensitivity::from_time_course`], or any thresholds filled into a [`Sensitivity`];
 //! * per pixel ([`Adaptation::Local`]): a map of adaptation luminances, one per pixel
 //!   (e.g. a foveal average around each pixel, as Ward Larson et al. 1997 use), where
 //!   Eq. 4–6 are evaluated at each pixel's own levels.
@@ -134,6 +135,18 @@ impl Sensitivity {
             cone_threshold_cd_m2: report.cone_threshold_cd_m2,
             rod_threshold_scotopic_cd_m2: report.rod_threshold_scotopic_cd_m2,
             rod_weight: report.mapping.rod_weight,
+        }
+    }
+
+    /// The thresholds of a time-varying adaptation state at this moment: raised above Eq. 4
+    /// and 5 while adaptation is under way, equal to [`Sensitivity::steady_state`] once it is
+    /// complete; `k` (Eq. 6) at the state's scotopic world luminance, as its display mapping
+    /// uses.
+    pub fn from_time_course(state: &crate::timecourse::Adaptation) -> Self {
+        Sensitivity {
+            cone_threshold_cd_m2: state.cone_threshold_cd_m2(),
+            rod_threshold_scotopic_cd_m2: state.rod_threshold_scotopic_cd_m2(),
+            rod_weight: rod_weight(state.world_scotopic_cd_m2()),
         }
     }
 

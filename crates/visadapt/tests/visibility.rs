@@ -433,6 +433,53 @@ fn thresholds_can_come_from_a_time_varying_state() {
     assert!(a.visible_fraction == 1.0 && b.visible_fraction == 0.0);
 }
 
+/// The time course of adaptation (Sec. 3.5, Eq. 8–9) feeds the same measure: just after the
+/// lights go up the observer is dazzled and sees less; once adapted, exactly the steady state.
+#[test]
+fn a_time_course_state_feeds_the_thresholds() {
+    let reference = scene(32, 32, 100.0);
+    let mut test = reference.clone();
+    for i in 0..test.len() {
+        perturb(&mut test, i, 4.0);
+    }
+    let view = |s| Viewer {
+        adaptation: Adaptation::Global(s),
+        acuity_sigma_px: 0.0,
+    };
+    let steady = difference(
+        &reference,
+        &test,
+        &view(Sensitivity::steady_state(50.0, 113.05)),
+    )
+    .unwrap();
+    // Adapted to 0.1 cd/m², the world switches to 50 cd/m² (scotopic 113.05).
+    let mut eye = visadapt::timecourse::Adaptation::equal_energy(0.1).unwrap();
+    eye.step(0.0, 50.0, 113.05).unwrap();
+    let dazzled = difference(
+        &reference,
+        &test,
+        &view(Sensitivity::from_time_course(&eye)),
+    )
+    .unwrap();
+    assert!(
+        dazzled.max_jnd < 0.8 * steady.max_jnd,
+        "{} vs {}",
+        dazzled.max_jnd,
+        steady.max_jnd
+    );
+    // An hour later adaptation is complete: the steady-state thresholds again.
+    eye.step(3600.0, 50.0, 113.05).unwrap();
+    let s = Sensitivity::from_time_course(&eye);
+    let expected = Sensitivity::steady_state(50.0, 113.05);
+    assert!((s.cone_threshold_cd_m2 / expected.cone_threshold_cd_m2 - 1.0).abs() < 1e-3);
+    assert!(
+        (s.rod_threshold_scotopic_cd_m2 / expected.rod_threshold_scotopic_cd_m2 - 1.0).abs() < 1e-3
+    );
+    assert_eq!(s.rod_weight, expected.rod_weight);
+    let adapted = difference(&reference, &test, &view(s)).unwrap();
+    assert!((adapted.max_jnd / steady.max_jnd - 1.0).abs() < 1e-3);
+}
+
 /// Per-pixel adaptation: a map equal to the global level changes nothing; a map equal to
 /// each pixel's own luminance makes the cone threshold follow Weber's law pixel by pixel.
 #[test]
