@@ -1292,7 +1292,9 @@ mod tests {
             "COLORCORR=1 0 1",
             "PRIMARIES=0.64 0.33 0.3 0.6 0.15 0.06 0.3127",
             "PRIMARIES=0.3 0.3 0.3 0.3 0.15 0.06 0.3127 0.3290",
-            "PRIMARIES=0.64 0 0.3 0.6 0.15 0.06 0.3127 0.3290",
+            // A white point with y = 0 has no luminance to normalise to. (A primary with
+            // y = 0 is valid: an imaginary primary, such as those of CIE XYZ.)
+            "PRIMARIES=0.64 0.33 0.3 0.6 0.15 0.06 0.3127 0",
         ] {
             assert_decode_err(&with(bad), bad);
         }
