@@ -6,8 +6,8 @@
 //! switch, each through the Eq. 8–9 mapping of the observer's state at that moment
 //! ([`timecourse`](crate::timecourse)). "Lit at L" means, as for `visadapt map --peak`,
 //! that the scene is rescaled so that its highest visible photopic luminance
-//! ([`adaptation::highest_visible`]) is `L` cd/m²; the world adaptation of each level then
-//! follows Sec. 4.4 ([`operator::plan`]).
+//! ([`highest_visible`]) is `L` cd/m²; the world adaptation of each level then follows
+//! Sec. 4.4 ([`operator::plan`]).
 //!
 //! The first frame (index 0) shows the scene at the first level, fully adapted (the first
 //! frame of each row of Fig. 12); frame `i ≥ 1` shows it `times_seconds[i−1]` after the
