@@ -43,6 +43,13 @@ pub enum Command {
     /// Draw one of the paper's model figures from the library's own functions.
     #[command(after_help = PLOT_EXAMPLES)]
     Plot(PlotArgs),
+    /// How visible the difference between two HDR images of one scene is, in JNDs, to an
+    /// observer adapted to the first; optionally a heat map with a colour bar.
+    #[command(after_help = VISIBLE_EXAMPLES)]
+    Visible(VisibleArgs),
+    /// Per pixel, the largest luminance error that stays invisible (cd/m², written as EXR).
+    #[command(after_help = TOLERANCE_EXAMPLES)]
+    Tolerance(ToleranceArgs),
 }
 
 const MAP_EXAMPLES: &str = "\
@@ -237,6 +244,125 @@ pub enum PlotName {
     /// Figs. 8-10: the time course of light (rods, cones) and dark adaptation.
     #[value(name = "timecourse", alias = "fig8-10")]
     Timecourse,
+}
+
+const VISIBLE_EXAMPLES: &str = "\
+Examples:
+  visadapt visible reference.exr render.exr                 # fraction visible, mean and max JND
+  visadapt visible a.hdr b.hdr -o jnd.png --json            # heat map with colour bar + JSON
+  visadapt visible a.hdr b.hdr --peak 0.01 --fov 40         # the same pair lit at night
+
+JND: a difference's photopic and scotopic parts after the acuity Gaussian (Eq. 7), each in
+units of its threshold (Eq. 4 cones, Eq. 5 rods weighted by k of Eq. 6), combined by
+probability summation (exponent 3.5). A pixel is visibly different at 1 JND or more.";
+
+const TOLERANCE_EXAMPLES: &str = "\
+Examples:
+  visadapt tolerance render.exr -o tolerance.exr
+  visadapt tolerance scene.hdr --peak 0.05 -o night-tolerance.exr --json
+
+The map holds, per pixel, the luminance threshold in cd/m² for a change of that pixel's
+colour (Eq. 4-6 at the observer's adaptation): errors below it are invisible.";
+
+#[derive(Debug, Args)]
+pub struct VisibleArgs {
+    /// Reference HDR image; the observer adapts to it.
+    #[arg(value_name = "REF")]
+    pub reference: PathBuf,
+
+    /// Test HDR image of the same scene, same size.
+    #[arg(value_name = "TEST")]
+    pub test: PathBuf,
+
+    /// Write a heat map of the JNDs with a colour bar (PNG).
+    #[arg(short, long, value_name = "MAP.png")]
+    pub output: Option<PathBuf>,
+
+    /// World adaptation luminance in cd/m² [default: half the reference's highest visible
+    /// luminance].
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub world_adaptation: Option<f64>,
+
+    /// World rod adaptation in scotopic cd/m² [default: from the reference, as for `map`].
+    #[arg(long, allow_negative_numbers = true, value_name = "LS")]
+    pub scotopic_adaptation: Option<f64>,
+
+    /// Horizontal field of view of the images in degrees (perspective), for the acuity
+    /// Gaussian. Overrides the reference's VIEW; without either, 60 degrees is assumed.
+    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
+    pub fov: Option<f64>,
+
+    /// Ignore acuity (Eq. 7): compare the images at full resolution.
+    #[arg(long)]
+    pub no_acuity: bool,
+
+    /// Multiply both images by S to get cd/m².
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "S",
+        conflicts_with = "peak"
+    )]
+    pub scale: Option<f64>,
+
+    /// Rescale both images so that the reference's highest visible luminance is L cd/m².
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub peak: Option<f64>,
+
+    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
+    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
+    pub hot_pixel_fraction: f64,
+
+    /// Largest accepted input in pixels (width x height).
+    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
+    pub max_pixels: u64,
+
+    /// Print the result as JSON on standard output instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct ToleranceArgs {
+    /// Input HDR image (format detected from its contents).
+    pub input: PathBuf,
+
+    /// Output OpenEXR file: one channel `Y`, the tolerance in cd/m².
+    #[arg(short, long, value_name = "TOL.exr")]
+    pub output: PathBuf,
+
+    /// World adaptation luminance in cd/m² [default: half the highest visible luminance].
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub world_adaptation: Option<f64>,
+
+    /// World rod adaptation in scotopic cd/m² [default: from the image, as for `map`].
+    #[arg(long, allow_negative_numbers = true, value_name = "LS")]
+    pub scotopic_adaptation: Option<f64>,
+
+    /// Multiply the input by S to get cd/m².
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "S",
+        conflicts_with = "peak"
+    )]
+    pub scale: Option<f64>,
+
+    /// Rescale so that the highest visible luminance is L cd/m².
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub peak: Option<f64>,
+
+    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
+    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
+    pub hot_pixel_fraction: f64,
+
+    /// Largest accepted input in pixels (width x height).
+    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
+    pub max_pixels: u64,
+
+    /// Print the summary as JSON on standard output instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 // ---- time course of adaptation (timecourse, sequence, video) ----

@@ -46,6 +46,8 @@ fn main() -> ExitCode {
         cli::Command::Chart(args) => commands::chart::run(args),
         cli::Command::Demo(args) => commands::demo::run(args),
         cli::Command::Plot(args) => commands::plot::run(args),
+        cli::Command::Visible(args) => commands::visible::run(args),
+        cli::Command::Tolerance(args) => commands::tolerance::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

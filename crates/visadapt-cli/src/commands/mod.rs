@@ -6,4 +6,6 @@ pub mod observer;
 pub mod plot;
 pub mod sequence;
 pub mod timecourse;
+pub mod tolerance;
 pub mod video;
+pub mod visible;

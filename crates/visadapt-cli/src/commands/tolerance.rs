@@ -1,0 +1,188 @@
+//! `visadapt tolerance IN -o TOL.exr`: per pixel, the largest luminance error that stays
+//! invisible to an observer adapted to the image ([`visadapt::visibility::tolerance_map`],
+//! Ferwerda et al. 1996 Eq. 4–6), written as a one-channel OpenEXR in cd/m².
+
+use crate::cli::ToleranceArgs;
+use anyhow::{Context, bail};
+use serde_json::json;
+use std::path::Path;
+use visadapt::Limits;
+use visadapt::adaptation::highest_visible;
+use visadapt::io;
+use visadapt::operator::{Source, ViewingConditions};
+use visadapt::visibility::{self, Viewer};
+
+pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
+    // Everything that can be checked before reading is checked first.
+    let is_exr = args
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    if !is_exr {
+        bail!(
+            "{}: the tolerance map is written as OpenEXR (use .exr)",
+            args.output.display()
+        );
+    }
+    if let (Ok(a), Ok(b)) = (args.input.canonicalize(), args.output.canonicalize())
+        && a == b
+    {
+        bail!(
+            "{}: output would overwrite the input",
+            args.output.display()
+        );
+    }
+    for (name, v) in [("--scale", args.scale), ("--peak", args.peak)] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            bail!("invalid {name} {v}: must be a positive, finite number");
+        }
+    }
+    let conditions = ViewingConditions {
+        world_adaptation_cd_m2: args.world_adaptation,
+        world_adaptation_scotopic_cd_m2: args.scotopic_adaptation,
+        hot_pixel_fraction: args.hot_pixel_fraction,
+        // The tolerance holds for errors of any extent; acuity does not enter it.
+        acuity: false,
+        ..ViewingConditions::default()
+    };
+    conditions.validate()?;
+
+    let limits = Limits {
+        max_pixels: args.max_pixels,
+    };
+    let mut image =
+        io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
+    let scale = match (args.scale, args.peak) {
+        (Some(s), _) => s,
+        (None, Some(peak)) => {
+            let hv = highest_visible(&image.y, args.hot_pixel_fraction) as f64;
+            if hv <= 0.0 {
+                bail!(
+                    "{}: --peak: the image has no visible luminance to rescale",
+                    args.input.display()
+                );
+            }
+            peak / hv
+        }
+        (None, None) => {
+            if !image.absolute_units {
+                log::warn!(
+                    "{}: the file does not say its units; its values are taken as cd/m² (use --scale or --peak)",
+                    args.input.display()
+                );
+            }
+            1.0
+        }
+    };
+    if scale != 1.0 {
+        image.scale(scale as f32);
+    }
+    let (viewer, report) = Viewer::for_image(&image, &conditions)?;
+    let tolerance = visibility::tolerance_map(&image, &viewer)?;
+
+    // Summary: the range of the map, and its median relative to the pixels' luminance.
+    let mut sorted = tolerance.clone();
+    sorted.sort_unstable_by(f32::total_cmp);
+    let (min, median, max) = (
+        sorted[0],
+        sorted[sorted.len() / 2],
+        sorted[sorted.len() - 1],
+    );
+    let mut relative: Vec<f32> = tolerance
+        .iter()
+        .zip(&image.y)
+        .filter(|(_, y)| y.is_finite() && **y > 0.0)
+        .map(|(t, y)| t / y)
+        .collect();
+    relative.sort_unstable_by(f32::total_cmp);
+    let median_relative = relative.get(relative.len() / 2).copied();
+
+    write_luminance_exr(&args.output, image.width, image.height, tolerance)?;
+
+    let given = report.world_adaptation_source == Source::Caller;
+    if args.json {
+        let v = json!({
+            "width": image.width,
+            "height": image.height,
+            "adaptation_cd_m2": report.world_adaptation_cd_m2,
+            "adaptation_source": if given { "given" } else { "image" },
+            "scotopic_adaptation_cd_m2": report.world_adaptation_scotopic_cd_m2,
+            "cone_threshold_cd_m2": report.cone_threshold_cd_m2,
+            "rod_threshold_scotopic_cd_m2": report.rod_threshold_scotopic_cd_m2,
+            "rod_weight": report.mapping.rod_weight,
+            "min_tolerance_cd_m2": min,
+            "median_tolerance_cd_m2": median,
+            "max_tolerance_cd_m2": max,
+            "median_relative_tolerance": median_relative,
+            "input_scale": scale,
+            "output": args.output.display().to_string(),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!(
+            "observer (Sec. 4.4)           adapted to {:.4e} cd/m² ({}), {:.4e} scotopic cd/m²",
+            report.world_adaptation_cd_m2,
+            if given { "given" } else { "from the image" },
+            report.world_adaptation_scotopic_cd_m2
+        );
+        println!(
+            "thresholds (Eq. 4, 5, 6)      cones {:.4e} cd/m², rods {:.4e} scotopic cd/m², rod weight k {:.3}",
+            report.cone_threshold_cd_m2,
+            report.rod_threshold_scotopic_cd_m2,
+            report.mapping.rod_weight
+        );
+        println!(
+            "tolerance                     min {min:.4e}, median {median:.4e}, max {max:.4e} cd/m²"
+        );
+        if let Some(r) = median_relative {
+            println!(
+                "                              median {:.2} % of the pixel's luminance",
+                100.0 * r
+            );
+        }
+        println!("wrote                         {}", args.output.display());
+    }
+    Ok(())
+}
+
+/// Write one luminance plane (cd/m²) as a single-channel `Y` OpenEXR, 32-bit float, RLE,
+/// with `whiteLuminance` = 1 (the values are cd/m²), atomically. The library's OpenEXR
+/// reader reads it back as a grey image in absolute units.
+fn write_luminance_exr(
+    path: &Path,
+    width: usize,
+    height: usize,
+    y: Vec<f32>,
+) -> anyhow::Result<()> {
+    use exr::prelude::*;
+    io::display::write_atomically(path, |w| {
+        let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> =
+            std::iter::once(AnyChannel::new("Y", FlatSamples::F32(y))).collect();
+        let attributes = LayerAttributes {
+            white_luminance: Some(1.0),
+            ..LayerAttributes::default()
+        };
+        let encoding = Encoding {
+            compression: Compression::RLE,
+            blocks: Blocks::ScanLines,
+            line_order: LineOrder::Increasing,
+        };
+        let layer = Layer::new(
+            (width, height),
+            attributes,
+            encoding,
+            AnyChannels::sort(channels),
+        );
+        Image::from_layer(layer)
+            .write()
+            .to_unbuffered(w)
+            .map_err(|e| match e {
+                exr::error::Error::Io(e) => visadapt::Error::Io(e),
+                other => visadapt::Error::Unsupported(format!("OpenEXR writer: {other}")),
+            })
+    })
+    .with_context(|| path.display().to_string())
+}

@@ -1,0 +1,351 @@
+//! `visadapt visible REF TEST`: how visible the difference between two HDR images of one
+//! scene is to an observer adapted to the reference, in just-noticeable differences (JNDs),
+//! with an optional heat map and colour bar. The model is [`visadapt::visibility`]
+//! (Ferwerda et al. 1996, Eq. 4–7).
+
+use crate::cli::VisibleArgs;
+use crate::graphics::{self, PictureFormat};
+use anyhow::{Context, bail};
+use plotters::style::RGBColor;
+use serde_json::{Value, json};
+use std::path::Path;
+use visadapt::adaptation::highest_visible;
+use visadapt::io;
+use visadapt::operator::{Report, ViewingConditions};
+use visadapt::visibility::{self, Difference, POOLING_EXPONENT, Viewer};
+use visadapt::{HdrImage, Limits, View};
+
+pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
+    // Everything that can be checked before reading is checked first.
+    for (name, v) in [
+        ("--scale", args.scale),
+        ("--peak", args.peak),
+        ("--fov", args.fov),
+    ] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            bail!("invalid {name} {v}: must be a positive, finite number");
+        }
+    }
+    if let Some(out) = &args.output {
+        if PictureFormat::from_path(out)? != PictureFormat::Png {
+            bail!(
+                "{}: the heat map is written as PNG (use .png)",
+                out.display()
+            );
+        }
+        refuse_to_overwrite(&[&args.reference, &args.test], out)?;
+    }
+    let conditions = ViewingConditions {
+        world_adaptation_cd_m2: args.world_adaptation,
+        world_adaptation_scotopic_cd_m2: args.scotopic_adaptation,
+        hot_pixel_fraction: args.hot_pixel_fraction,
+        acuity: !args.no_acuity,
+        ..ViewingConditions::default()
+    };
+    conditions.validate()?;
+
+    let limits = Limits {
+        max_pixels: args.max_pixels,
+    };
+    let read = |path: &Path| io::read(path, &limits).with_context(|| path.display().to_string());
+    let mut reference = read(&args.reference)?;
+    let mut test = read(&args.test)?;
+    if (reference.width, reference.height) != (test.width, test.height) {
+        bail!(
+            "{}: {}x{} pixels, but the reference {} is {}x{}; the images must be the same size",
+            args.test.display(),
+            test.width,
+            test.height,
+            args.reference.display(),
+            reference.width,
+            reference.height
+        );
+    }
+    let scale = input_scale(&args, &reference, &test)?;
+    if scale != 1.0 {
+        reference.scale(scale as f32);
+        test.scale(scale as f32);
+    }
+    let conditions = ViewingConditions {
+        view: args
+            .fov
+            .map(|fov| View::perspective(fov, reference.width, reference.height)),
+        ..conditions
+    };
+    let (viewer, report) = Viewer::for_image(&reference, &conditions)?;
+    let d = visibility::difference(&reference, &test, &viewer)?;
+    if d.non_finite_pixels > 0 {
+        log::warn!(
+            "{} pixels with NaN or infinite values read as black",
+            d.non_finite_pixels
+        );
+    }
+    if let Some(out) = &args.output {
+        let (w, h, rgb) = heat_map(&d)?;
+        graphics::write_rgb_png(out, w, h, &rgb)?;
+    }
+
+    if args.json {
+        let v = json_report(&d, &report, scale, args.output.as_deref());
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        print!("{}", text_report(&d, &report));
+        if let Some(out) = &args.output {
+            println!("wrote                         {}", out.display());
+        }
+    }
+    Ok(())
+}
+
+/// The factor that turns both images into cd/m²: `--scale`, or `--peak` over the
+/// reference's highest visible luminance, or 1.
+fn input_scale(args: &VisibleArgs, reference: &HdrImage, test: &HdrImage) -> anyhow::Result<f64> {
+    Ok(match (args.scale, args.peak) {
+        (Some(s), _) => s,
+        (None, Some(peak)) => {
+            let hv = highest_visible(&reference.y, args.hot_pixel_fraction) as f64;
+            if hv <= 0.0 {
+                bail!(
+                    "{}: --peak: the image has no visible luminance to rescale",
+                    args.reference.display()
+                );
+            }
+            peak / hv
+        }
+        (None, None) => {
+            for (path, image) in [(&args.reference, reference), (&args.test, test)] {
+                if !image.absolute_units {
+                    log::warn!(
+                        "{}: the file does not say its units; its values are taken as cd/m² (use --scale or --peak)",
+                        path.display()
+                    );
+                }
+            }
+            1.0
+        }
+    })
+}
+
+/// The output must never replace an input.
+fn refuse_to_overwrite(inputs: &[&Path], output: &Path) -> anyhow::Result<()> {
+    if let Ok(out) = output.canonicalize() {
+        for input in inputs {
+            if input.canonicalize().is_ok_and(|i| i == out) {
+                bail!("{}: output would overwrite an input", output.display());
+            }
+        }
+    }
+    Ok(())
+}
+
+fn json_report(d: &Difference, r: &Report, scale: f64, map: Option<&Path>) -> Value {
+    json!({
+        "width": d.width,
+        "height": d.height,
+        "visible_fraction": d.visible_fraction,
+        "visible_pixels": (d.visible_fraction * (d.width * d.height) as f64).round() as u64,
+        "mean_jnd": d.mean_jnd,
+        "max_jnd": d.max_jnd,
+        "adaptation_cd_m2": r.world_adaptation_cd_m2,
+        "adaptation_source": if r.world_adaptation_source == visadapt::operator::Source::Caller { "given" } else { "reference image" },
+        "scotopic_adaptation_cd_m2": r.world_adaptation_scotopic_cd_m2,
+        "cone_threshold_cd_m2": r.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": r.rod_threshold_scotopic_cd_m2,
+        "rod_weight": r.mapping.rod_weight,
+        "pooling_exponent": POOLING_EXPONENT,
+        "acuity_cycles_per_degree": r.acuity.cutoff_cycles_per_degree,
+        "acuity_applied": r.acuity_applied,
+        "blur_sigma_px": r.mapping.blur_sigma_px,
+        "pixels_per_degree": r.pixels_per_degree,
+        "horizontal_fov_deg": r.view.horizontal_deg,
+        "input_scale": scale,
+        "non_finite_pixels": d.non_finite_pixels,
+        "map": map.map(|p| p.display().to_string()),
+    })
+}
+
+fn text_report(d: &Difference, r: &Report) -> String {
+    let blur = if !r.acuity_applied {
+        "off (--no-acuity)".to_string()
+    } else if r.mapping.blur_sigma_px > 0.0 {
+        format!("sigma {:.3} px", r.mapping.blur_sigma_px)
+    } else {
+        "below a pixel's resolution".to_string()
+    };
+    format!(
+        "images                        {}x{}\n\
+         observer (Sec. 4.4)           adapted to {:.4e} cd/m² ({}), {:.4e} scotopic cd/m²\n\
+         thresholds (Eq. 4, 5, 6)      cones {:.4e} cd/m², rods {:.4e} scotopic cd/m², rod weight k {:.3}\n\
+         acuity (Eq. 7)                {:.2} cycles/degree, blur {} ({:.1} deg field)\n\
+         visible difference            {:.3} % of the pixels at 1 JND or more\n\
+         JND                           mean {:.4}, max {:.4}\n",
+        d.width,
+        d.height,
+        r.world_adaptation_cd_m2,
+        if r.world_adaptation_source == visadapt::operator::Source::Caller {
+            "given"
+        } else {
+            "from the reference"
+        },
+        r.world_adaptation_scotopic_cd_m2,
+        r.cone_threshold_cd_m2,
+        r.rod_threshold_scotopic_cd_m2,
+        r.mapping.rod_weight,
+        r.acuity.cutoff_cycles_per_degree,
+        blur,
+        r.view.horizontal_deg,
+        100.0 * d.visible_fraction,
+        d.mean_jnd,
+        d.max_jnd,
+    )
+}
+
+/// Bottom of the colour scale, JND (smaller values take its colour).
+pub const SCALE_MIN_JND: f32 = 0.1;
+/// Top of the colour scale, JND (larger values take its colour).
+pub const SCALE_MAX_JND: f32 = 100.0;
+
+/// matplotlib's "inferno" colour map (S. van der Walt, N. Smith, 2015) sampled at 0, 1/4,
+/// 1/2, 3/4 and 1 (its entries 0, 64, 128, 192, 255 as 8-bit sRGB), interpolated linearly
+/// in between: dark to light, so it reads in grey too.
+const INFERNO: [[f32; 3]; 5] = [
+    [0.0, 0.0, 4.0],
+    [87.0, 16.0, 110.0],
+    [188.0, 55.0, 84.0],
+    [249.0, 142.0, 9.0],
+    [252.0, 255.0, 164.0],
+];
+
+/// Position on the colour scale (0 at [`SCALE_MIN_JND`], 1 at [`SCALE_MAX_JND`]),
+/// logarithmic in JND.
+fn scale_position(jnd: f32) -> f32 {
+    let lo = SCALE_MIN_JND.log10();
+    let hi = SCALE_MAX_JND.log10();
+    let t = (jnd.max(SCALE_MIN_JND).log10() - lo) / (hi - lo);
+    if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) }
+}
+
+/// The colour of position `t` in [0, 1] on the scale.
+fn colour_at(t: f32) -> [u8; 3] {
+    let x = t.clamp(0.0, 1.0) * (INFERNO.len() - 1) as f32;
+    let i = (x as usize).min(INFERNO.len() - 2);
+    let f = x - i as f32;
+    let (a, b) = (INFERNO[i], INFERNO[i + 1]);
+    [0, 1, 2].map(|c| (a[c] + (b[c] - a[c]) * f).round() as u8)
+}
+
+/// The heat-map colour of a JND value.
+pub fn jnd_colour(jnd: f32) -> [u8; 3] {
+    colour_at(scale_position(jnd))
+}
+
+/// Smallest height of the picture, so that the colour bar and its labels fit.
+const MIN_HEIGHT: usize = 240;
+
+/// The heat map of `d` (one pixel per image pixel) with a logarithmic colour bar and its
+/// labels to the right, on white: `(width, height, interleaved sRGB)`.
+fn heat_map(d: &Difference) -> anyhow::Result<(u32, u32, Vec<u8>)> {
+    let (w, h) = (d.width, d.height);
+    let canvas_h = h.max(MIN_HEIGHT);
+    // Text and bar grow with the picture, up to 4×.
+    let s = (canvas_h as f64 / MIN_HEIGHT as f64).clamp(1.0, 4.0);
+    let px = |v: f64| (v * s).round() as usize;
+    let font = 13.0 * s;
+    let panel = px(150.0);
+    let canvas_w = w + panel;
+    let too_big = || anyhow::anyhow!("{canvas_w}x{canvas_h} is too large for a PNG heat map");
+    let (cw, ch) = (
+        u32::try_from(canvas_w).map_err(|_| too_big())?,
+        u32::try_from(canvas_h).map_err(|_| too_big())?,
+    );
+    let mut rgb = vec![255u8; canvas_w * canvas_h * 3];
+    let mut put = |x: usize, y: usize, c: [u8; 3]| {
+        let i = (y * canvas_w + x) * 3;
+        rgb[i..i + 3].copy_from_slice(&c);
+    };
+    for (y, row) in d.jnd.chunks_exact(w).enumerate() {
+        for (x, &j) in row.iter().enumerate() {
+            put(x, y, jnd_colour(j));
+        }
+    }
+
+    // The bar, top = SCALE_MAX_JND, with a black frame and tick marks.
+    let (x0, x1) = (w + px(14.0), w + px(34.0));
+    let (top, bottom) = (px(34.0), canvas_h - px(14.0));
+    let y_of = |t: f32| bottom - (t * (bottom - top) as f32).round() as usize;
+    for y in top..=bottom {
+        let c = colour_at((bottom - y) as f32 / (bottom - top) as f32);
+        for x in x0..x1 {
+            put(x, y, c);
+        }
+    }
+    let black = [0, 0, 0];
+    for x in x0 - 1..=x1 {
+        put(x, top - 1, black);
+        put(x, bottom + 1, black);
+    }
+    for y in top - 1..=bottom + 1 {
+        put(x0 - 1, y, black);
+        put(x1, y, black);
+    }
+    let ticks = [
+        (0.1f32, "0.1"),
+        (1.0, "1  threshold"),
+        (10.0, "10"),
+        (100.0, "100"),
+    ];
+    for (v, _) in ticks {
+        let y = y_of(scale_position(v));
+        for x in x1..x1 + px(6.0) {
+            put(x, y, black);
+        }
+    }
+    let text_x = (x1 + px(9.0)) as i32;
+    for (v, label) in ticks {
+        let y = y_of(scale_position(v)) as i32 - (0.55 * font) as i32;
+        graphics::draw_text(
+            &mut rgb,
+            (cw, ch),
+            (text_x, y),
+            font,
+            RGBColor(0, 0, 0),
+            &[label.to_string()],
+        )?;
+    }
+    graphics::draw_text(
+        &mut rgb,
+        (cw, ch),
+        ((x0 - px(6.0)) as i32, px(8.0) as i32),
+        font,
+        RGBColor(0, 0, 0),
+        &["JND (log scale)".to_string()],
+    )?;
+    Ok((cw, ch, rgb))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colour_scale_is_logarithmic_and_clamped() {
+        assert_eq!(jnd_colour(0.0), [0, 0, 4]);
+        assert_eq!(jnd_colour(f32::NAN), [0, 0, 4]);
+        assert_eq!(jnd_colour(0.1), [0, 0, 4]);
+        assert_eq!(jnd_colour(100.0), [252, 255, 164]);
+        assert_eq!(jnd_colour(1e9), [252, 255, 164]);
+        // 1 JND is a third of the way up (0.1 → 100 spans three decades).
+        assert!((scale_position(1.0) - 1.0 / 3.0).abs() < 1e-6);
+        assert!((scale_position(10.0) - 2.0 / 3.0).abs() < 1e-6);
+        // Lightness rises along the scale.
+        let luma = |c: [u8; 3]| 0.2126 * c[0] as f32 + 0.7152 * c[1] as f32 + 0.0722 * c[2] as f32;
+        let mut prev = -1.0;
+        for i in 0..=100 {
+            let l = luma(colour_at(i as f32 / 100.0));
+            assert!(l >= prev, "{i}");
+            prev = l;
+        }
+    }
+}

@@ -1,0 +1,472 @@
+//! `visadapt visible` and `visadapt tolerance`, end to end.
+
+use assert_cmd::Command;
+use std::path::{Path, PathBuf};
+use visadapt::{HdrImage, Limits};
+
+fn visadapt() -> Command {
+    Command::cargo_bin("visadapt").unwrap()
+}
+
+/// Eq. 4, written out independently of the library.
+fn tp(l: f64) -> f64 {
+    let x = l.log10();
+    10f64.powf(if x <= -2.6 {
+        -0.72
+    } else if x >= 1.9 {
+        x - 1.255
+    } else {
+        (0.249 * x + 0.65).powf(2.7) - 0.72
+    })
+}
+
+/// Eq. 5, written out independently of the library.
+fn ts(l: f64) -> f64 {
+    let x = l.log10();
+    10f64.powf(if x <= -3.94 {
+        -2.86
+    } else if x >= -1.44 {
+        x - 0.395
+    } else {
+        (0.405 * x + 1.6).powf(2.18) - 2.86
+    })
+}
+
+/// An equal-energy grey field at `l` cd/m² with its scotopic channel (S/P 2.261).
+fn grey(w: usize, h: usize, l: f32) -> HdrImage {
+    let mut im = HdrImage::zeros(w, h);
+    im.x.fill(l);
+    im.y.fill(l);
+    im.z.fill(l);
+    im.scotopic = Some(vec![2.261 * l; w * h]);
+    im.absolute_units = true;
+    im
+}
+
+/// `image` changed by `delta[i]` cd/m² at each pixel, in its own colour.
+fn perturbed(image: &HdrImage, delta: impl Fn(usize, usize) -> f64) -> HdrImage {
+    let mut out = image.clone();
+    for y in 0..image.height {
+        for x in 0..image.width {
+            let i = y * image.width + x;
+            let f = ((image.y[i] as f64 + delta(x, y)) / image.y[i] as f64) as f32;
+            out.x[i] *= f;
+            out.y[i] *= f;
+            out.z[i] *= f;
+            if let Some(s) = &mut out.scotopic {
+                s[i] *= f;
+            }
+        }
+    }
+    out
+}
+
+fn write(dir: &Path, name: &str, image: &HdrImage) -> PathBuf {
+    let path = dir.join(name);
+    let file = std::fs::File::create(&path).unwrap();
+    visadapt::io::exr::write_hdr(image, std::io::BufWriter::new(file)).unwrap();
+    path
+}
+
+fn json(out: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(out).expect("stdout is one JSON value")
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+fn one_line_error(stderr: &[u8]) -> String {
+    let s = String::from_utf8_lossy(stderr).into_owned();
+    assert_eq!(s.trim_end().lines().count(), 1, "not one line: {s:?}");
+    assert!(!s.contains("panicked"), "{s}");
+    s
+}
+
+/// A 64×32 grey field at 100 cd/m², and the same with ±3 thresholds of noise (random
+/// sign) on its left half and ±0.5 threshold on its right half; the threshold is
+/// t_p(50) = 3.0878 cd/m², the observer adapting to half the field's luminance.
+fn noisy_pair(dir: &Path) -> (PathBuf, PathBuf) {
+    let reference = grey(64, 32, 100.0);
+    let t = tp(50.0);
+    let test = perturbed(&reference, |x, y| {
+        let sign = if (x * 7 + y * 13) % 5 < 2 { -1.0 } else { 1.0 };
+        sign * t * if x < 32 { 3.0 } else { 0.5 }
+    });
+    (
+        write(dir, "ref.exr", &reference),
+        write(dir, "test.exr", &test),
+    )
+}
+
+#[test]
+fn identical_images_show_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (reference, _) = noisy_pair(dir.path());
+    let out = visadapt()
+        .arg("visible")
+        .arg(&reference)
+        .arg(&reference)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json(&out.stdout);
+    assert_eq!(v["visible_fraction"], 0.0);
+    assert_eq!(v["mean_jnd"], 0.0);
+    assert_eq!(v["max_jnd"], 0.0);
+    assert!((v["adaptation_cd_m2"].as_f64().unwrap() - 50.0).abs() < 1e-4);
+}
+
+#[test]
+fn noise_is_reported_in_jnds_with_a_heat_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let (reference, test) = noisy_pair(dir.path());
+    let map = dir.path().join("map.png");
+    let out = visadapt()
+        .arg("visible")
+        .arg(&reference)
+        .arg(&test)
+        .arg("-o")
+        .arg(&map)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json(&out.stdout);
+    for key in [
+        "visible_fraction",
+        "mean_jnd",
+        "max_jnd",
+        "adaptation_cd_m2",
+        "scotopic_adaptation_cd_m2",
+        "cone_threshold_cd_m2",
+        "rod_weight",
+        "blur_sigma_px",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    // Left half 3 JND (visible), right half 0.5 JND: half the pixels, mean 1.75, max 3.
+    assert_eq!(v["visible_fraction"], 0.5);
+    assert!((v["mean_jnd"].as_f64().unwrap() - 1.75).abs() < 2e-3, "{v}");
+    assert!((v["max_jnd"].as_f64().unwrap() - 3.0).abs() < 2e-3, "{v}");
+    assert!((v["cone_threshold_cd_m2"].as_f64().unwrap() / tp(50.0) - 1.0).abs() < 1e-6);
+    assert_eq!(v["rod_weight"], 0.0);
+    // 60° over 64 px: the acuity Gaussian is far below a pixel.
+    assert_eq!(v["blur_sigma_px"], 0.0);
+
+    // The heat map: the image, then a colour bar panel; at least 240 px high.
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&map).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let (w, h) = (reader.info().width as usize, reader.info().height as usize);
+    assert_eq!((w, h), (64 + 150, 240));
+    let mut rgb = vec![0u8; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut rgb).unwrap();
+    let px = |x: usize, y: usize| {
+        let i = (y * w + x) * 3;
+        [rgb[i], rgb[i + 1], rgb[i + 2]]
+    };
+    // 3 JND is red-magenta (inferno at 0.49), 0.5 JND dark purple (inferno at 0.23).
+    assert_eq!(px(10, 10), [185, 54, 85]);
+    assert_eq!(px(50, 10), [81, 15, 103]);
+    // Below the image: white. The bar: pale yellow at its top (100 JND), near-black at
+    // its bottom (0.1 JND); black label text beside it.
+    assert_eq!(px(10, 100), [255, 255, 255]);
+    let bar_x = 64 + 24;
+    assert_eq!(px(bar_x, 34), [252, 255, 164]);
+    assert_eq!(px(bar_x, 226), [0, 0, 4]);
+    let dark_text = (64 + 40..w)
+        .flat_map(|x| (0..h).map(move |y| (x, y)))
+        .filter(|&(x, y)| px(x, y).iter().all(|&c| c < 80))
+        .count();
+    assert!(dark_text > 100, "{dark_text}");
+    let mut names = files_in(dir.path());
+    names.retain(|n| n != "ref.exr" && n != "test.exr");
+    assert_eq!(names, ["map.png"]);
+}
+
+#[test]
+fn text_report_names_the_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let (reference, test) = noisy_pair(dir.path());
+    let out = visadapt()
+        .arg("visible")
+        .arg(&reference)
+        .arg(&test)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let s = String::from_utf8(out.stdout).unwrap();
+    assert!(s.contains("50.000 % of the pixels at 1 JND or more"), "{s}");
+    assert!(s.contains("mean 1.75"), "{s}");
+    assert!(
+        s.contains("adapted to 5.0000e1 cd/m² (from the reference)"),
+        "{s}"
+    );
+}
+
+/// The same noise, the scene lit at 0.01 cd/m²: the rods' Weber fraction is 40 %, and the
+/// ±9.3 % noise becomes invisible (without the acuity Gaussian, which would lower it still).
+#[test]
+fn the_same_noise_is_invisible_at_night() {
+    let dir = tempfile::tempdir().unwrap();
+    let (reference, test) = noisy_pair(dir.path());
+    let out = visadapt()
+        .arg("visible")
+        .arg(&reference)
+        .arg(&test)
+        .args(["--peak", "0.01", "--no-acuity", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json(&out.stdout);
+    assert_eq!(v["visible_fraction"], 0.0);
+    // Adapted to 0.005 cd/m² and 0.0113 scotopic cd/m² (k = 1); the left half changes by
+    // 3·t_p(50)·1e-4 cd/m², seen by the rods: 2.261·9.263e-4 / t_s(0.011305) = 0.352 JND.
+    assert!((v["adaptation_cd_m2"].as_f64().unwrap() - 0.005).abs() < 1e-8);
+    let expected = 2.261 * 3.0 * tp(50.0) * 1e-4 / ts(0.011_305);
+    assert!(
+        (v["max_jnd"].as_f64().unwrap() / expected - 1.0).abs() < 2e-3,
+        "{v}"
+    );
+    assert!((expected - 0.352).abs() < 1e-3, "{expected}");
+}
+
+#[test]
+fn given_adaptation_and_field_of_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let (reference, test) = noisy_pair(dir.path());
+    let run = |extra: &[&str]| {
+        let out = visadapt()
+            .arg("visible")
+            .arg(&reference)
+            .arg(&test)
+            .arg("--json")
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        json(&out.stdout)
+    };
+    // Adapted to 5 cd/m² instead of 50: the cones' threshold falls to t_p(5) = 0.746.
+    let v = run(&["--world-adaptation", "5"]);
+    assert_eq!(v["adaptation_cd_m2"], 5.0);
+    assert_eq!(v["adaptation_source"], "given");
+    assert!((v["cone_threshold_cd_m2"].as_f64().unwrap() / tp(5.0) - 1.0).abs() < 1e-9);
+    assert!((tp(5.0) - 0.746).abs() < 1e-3);
+    assert_eq!(v["visible_fraction"], 1.0);
+    // 1° over 64 px: 64.0 px/degree at the centre; Eq. 7 at 50 cd/m² (cutoff 46.76 c/deg,
+    // c = 0.06176) gives sigma = sqrt(ln(1/c)/2)/(π·46.76) = 0.008034°, i.e. 0.514 px.
+    let v = run(&["--fov", "1"]);
+    assert!(
+        (v["pixels_per_degree"].as_f64().unwrap() - 64.0).abs() < 0.01,
+        "{v}"
+    );
+    assert!(
+        (v["blur_sigma_px"].as_f64().unwrap() - 0.514).abs() < 0.003,
+        "{v}"
+    );
+    // The blur averages the random-sign noise: fewer JNDs than without it.
+    let sharp = run(&["--fov", "1", "--no-acuity"]);
+    assert_eq!(sharp["blur_sigma_px"], 0.0);
+    assert!(v["mean_jnd"].as_f64().unwrap() < 0.9 * sharp["mean_jnd"].as_f64().unwrap());
+}
+
+#[test]
+fn images_of_different_sizes_give_one_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(dir.path(), "a.exr", &grey(64, 32, 1.0));
+    let b = write(dir.path(), "b.exr", &grey(32, 64, 1.0));
+    let map = dir.path().join("map.png");
+    let out = visadapt()
+        .arg("visible")
+        .arg(&a)
+        .arg(&b)
+        .arg("-o")
+        .arg(&map)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let e = one_line_error(&out.stderr);
+    assert!(
+        e.contains("b.exr") && e.contains("32x64") && e.contains("64x32"),
+        "{e}"
+    );
+    assert!(e.contains("same size"), "{e}");
+    assert_eq!(files_in(dir.path()), ["a.exr", "b.exr"]);
+}
+
+#[test]
+fn unreadable_images_give_one_clear_error_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.exr", &grey(16, 16, 1.0));
+    let garbage = dir.path().join("garbage.hdr");
+    std::fs::write(&garbage, b"this is not an image").unwrap();
+    let missing = dir.path().join("missing.exr");
+    let map = dir.path().join("map.png");
+    for (a, b, name) in [
+        (&good, &missing, "missing.exr"),
+        (&missing, &good, "missing.exr"),
+        (&good, &garbage, "garbage.hdr"),
+        (&garbage, &good, "garbage.hdr"),
+    ] {
+        let out = visadapt()
+            .arg("visible")
+            .arg(a)
+            .arg(b)
+            .arg("-o")
+            .arg(&map)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains(name), "{e}");
+    }
+    assert_eq!(files_in(dir.path()), ["garbage.hdr", "good.exr"]);
+}
+
+#[test]
+fn bad_arguments_are_refused_before_reading() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.exr", &grey(16, 16, 1.0));
+    for (extra, needle) in [
+        (vec!["-o", "map.jpg"], "map.jpg"),
+        (vec!["--fov", "0"], "--fov"),
+        (vec!["--peak", "-1"], "--peak"),
+        (vec!["--world-adaptation", "0"], "world-adaptation"),
+    ] {
+        let out = visadapt()
+            .current_dir(dir.path())
+            .arg("visible")
+            .arg(&good)
+            .arg(&good)
+            .args(&extra)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{extra:?}");
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains(needle), "{e}");
+    }
+    // The map may not replace an input.
+    let out = visadapt()
+        .arg("visible")
+        .arg(&good)
+        .arg(&good)
+        .arg("-o")
+        .arg(&good)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert_eq!(files_in(dir.path()), ["good.exr"]);
+}
+
+#[test]
+fn tolerance_map_is_written_in_cd_m2() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = write(dir.path(), "in.exr", &grey(40, 20, 100.0));
+    let tol = dir.path().join("tol.exr");
+    let out = visadapt()
+        .arg("tolerance")
+        .arg(&input)
+        .arg("-o")
+        .arg(&tol)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json(&out.stdout);
+    assert!((v["median_tolerance_cd_m2"].as_f64().unwrap() / tp(50.0) - 1.0).abs() < 1e-6);
+    assert!((v["median_relative_tolerance"].as_f64().unwrap() - 0.030_878).abs() < 1e-5);
+    // Read back: one grey channel, absolute units, t_p(50) = 3.0878 cd/m² everywhere.
+    let map = visadapt::io::read(&tol, &Limits::default()).unwrap();
+    assert_eq!((map.width, map.height), (40, 20));
+    assert!(map.absolute_units);
+    assert!(map.scotopic.is_none());
+    assert!(
+        map.y
+            .iter()
+            .all(|&t| (t as f64 / tp(50.0) - 1.0).abs() < 1e-6),
+        "{}",
+        map.y[0]
+    );
+
+    // Starlight: the same field at 0.002 cd/m²: the rods set the threshold,
+    // t_s(0.002261)/2.261 = 1.0832e-3 cd/m², 54 % of the luminance.
+    let out = visadapt()
+        .arg("tolerance")
+        .arg(&input)
+        .arg("-o")
+        .arg(&tol)
+        .args(["--peak", "0.002", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json(&out.stdout);
+    let expected = ts(0.002_261) / 2.261;
+    assert!((v["median_tolerance_cd_m2"].as_f64().unwrap() / expected - 1.0).abs() < 1e-4);
+    assert!((expected - 1.083_2e-3).abs() < 1e-6);
+    assert_eq!(files_in(dir.path()), ["in.exr", "tol.exr"]);
+}
+
+#[test]
+fn tolerance_bad_input_gives_one_clear_error_and_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let garbage = dir.path().join("garbage.exr");
+    std::fs::write(&garbage, b"v/1\x01 truncated").unwrap();
+    let tol = dir.path().join("tol.exr");
+    for (input, name) in [
+        (dir.path().join("missing.hdr"), "missing.hdr"),
+        (garbage.clone(), "garbage.exr"),
+    ] {
+        let out = visadapt()
+            .arg("tolerance")
+            .arg(&input)
+            .arg("-o")
+            .arg(&tol)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let e = one_line_error(&out.stderr);
+        assert!(e.contains(name), "{e}");
+    }
+    let input = write(dir.path(), "in.exr", &grey(8, 8, 1.0));
+    let out = visadapt()
+        .arg("tolerance")
+        .arg(&input)
+        .arg("-o")
+        .arg(dir.path().join("tol.png"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(one_line_error(&out.stderr).contains(".exr"));
+    assert_eq!(files_in(dir.path()), ["garbage.exr", "in.exr"]);
+}
