@@ -21,14 +21,17 @@
 //! source. The four levels use the same random numbers, so their noise is the same
 //! relative to the signal: only the observer changes.
 //!
-//! Run with `cargo run --release --example progressive_render`.
+//! Run with `cargo run --release --example progressive_render [-- OUT_DIR]`. With a
+//! directory, it also writes, per level, the exact picture and the estimate after
+//! [`SNAPSHOT_SPP`] samples per pixel as OpenEXR (X, Y, Z, scotopic in cd/m²), for
+//! `visadapt visible exact-daylight.exr estimate-daylight.exr --fov 30 -o jnd.png`.
 
 use std::f64::consts::PI;
 use visadapt::adaptation::highest_visible;
 use visadapt::operator::ViewingConditions;
 use visadapt::scotopic::EQUAL_ENERGY_SP_RATIO;
 use visadapt::visibility::{self, Viewer};
-use visadapt::{HdrImage, View};
+use visadapt::{HdrImage, View, io};
 
 /// Picture size, pixels.
 const WIDTH: usize = 240;
@@ -46,6 +49,8 @@ const LIGHT_HEIGHT: f64 = 0.8;
 /// Samples per pixel of the first pass, and the most the loop will take.
 const FIRST_PASS: u32 = 4;
 const MAX_SAMPLES: u32 = 1 << 16;
+/// Samples per pixel of the estimate written with `OUT_DIR`.
+const SNAPSHOT_SPP: u32 = 16;
 /// The fixed-precision rule: relative standard error of every pixel.
 const FIXED_RELATIVE_ERROR: f64 = 0.01;
 
@@ -71,6 +76,7 @@ fn main() -> Result<(), visadapt::Error> {
         view: Some(View::perspective(FOV_DEG, WIDTH, HEIGHT)),
         ..ViewingConditions::default()
     };
+    let out_dir = std::env::args_os().nth(1).map(std::path::PathBuf::from);
 
     println!(
         "{:<10} {:>10} {:>10} | {:>10} {:>9} | {:>9} {:>7} | true error at the perceptual stop",
@@ -87,6 +93,12 @@ fn main() -> Result<(), visadapt::Error> {
         let run = scene.progressive(light, &conditions)?;
         let (viewer, report) = Viewer::for_image(&exact, &conditions)?;
         let true_error = visibility::difference(&exact, &run.perceptual_image, &viewer)?;
+        if let Some(dir) = &out_dir {
+            for (file, picture) in [("exact", &exact), ("estimate", &run.snapshot)] {
+                let path = dir.join(format!("{file}-{name}.exr"));
+                io::display::write_atomically(&path, |w| io::exr::write_hdr(picture, w))?;
+            }
+        }
         println!(
             "{:<10} {:>10} {:>10} | {:>6} spp {:>8.1} % | {:>5} spp {:>6.0}x | max {:.2} JND, {:.2} % of pixels visible",
             name,
@@ -136,6 +148,8 @@ struct Run {
     perceptual_max_relative_error: f64,
     /// Samples per pixel when the 1 % rule stopped.
     fixed_spp: u32,
+    /// The estimate after [`SNAPSHOT_SPP`] samples per pixel.
+    snapshot: HdrImage,
 }
 
 /// The floor and the light.
@@ -206,6 +220,7 @@ impl Scene {
         let mut previous: Option<HdrImage> = None;
         let mut perceptual = None;
         let mut fixed_spp = None;
+        let mut snapshot = None;
         while samples < MAX_SAMPLES && (perceptual.is_none() || fixed_spp.is_none()) {
             let pass = if samples == 0 { FIRST_PASS } else { samples };
             for (k, (p, rho)) in self.points.iter().zip(&self.albedo).enumerate() {
@@ -247,6 +262,9 @@ impl Scene {
             if fixed_spp.is_none() && max_relative <= FIXED_RELATIVE_ERROR {
                 fixed_spp = Some(samples);
             }
+            if samples == SNAPSHOT_SPP {
+                snapshot = Some(current.clone());
+            }
             previous = Some(current);
         }
         let (perceptual_spp, perceptual_image, max_rel) = perceptual.unwrap_or_else(|| {
@@ -261,6 +279,7 @@ impl Scene {
             perceptual_image,
             perceptual_max_relative_error: max_rel,
             fixed_spp: fixed_spp.unwrap_or(samples),
+            snapshot: snapshot.expect("the loop passes the snapshot's sample count"),
         })
     }
 }
