@@ -1,9 +1,9 @@
 //! Text and JSON renderings of what the model used.
 
-use serde_json::{json, Value};
+use serde_json::{Value, json};
+use visadapt::Projection;
 use visadapt::observer::Observer;
 use visadapt::operator::{PixelStats, Report, Source};
-use visadapt::Projection;
 
 /// The `observer` JSON object (keys documented in the README).
 pub fn observer_json(o: &Observer) -> Value {
@@ -48,7 +48,11 @@ pub fn observer_text(o: &Observer) -> String {
         o.snellen(),
         o.acuity.sigma_deg,
         o.acuity.threshold_contrast,
-        if o.acuity.fallback { " (below the rod Weber range: held at 0.403)" } else { "" },
+        if o.acuity.fallback {
+            " (below the rod Weber range: held at 0.403)"
+        } else {
+            ""
+        },
     )
 }
 
@@ -119,9 +123,15 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
     let blur = if !r.acuity_applied {
         "off (--no-acuity)".to_string()
     } else if m.blur_sigma_px > 0.0 {
-        format!("sigma {:.3} px ({:.4} deg)", m.blur_sigma_px, r.acuity.sigma_deg)
+        format!(
+            "sigma {:.3} px ({:.4} deg)",
+            m.blur_sigma_px, r.acuity.sigma_deg
+        )
     } else {
-        format!("none (sigma {:.4} deg is below half a pixel's worth)", r.acuity.sigma_deg)
+        format!(
+            "none (sigma {:.4} deg is below half a pixel's worth)",
+            r.acuity.sigma_deg
+        )
     };
     format!(
         "image                         {}x{}\n\
@@ -152,14 +162,21 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
         r.acuity.cutoff_cycles_per_degree,
         r.snellen(),
         r.acuity.threshold_contrast,
-        if r.acuity.fallback { " (fallback below the rod Weber range)" } else { "" },
+        if r.acuity.fallback {
+            " (fallback below the rod Weber range)"
+        } else {
+            ""
+        },
         projection(r.view.projection),
         r.view.horizontal_deg,
         source(r.view_source),
         ppd,
         blur,
     ) + &if stats.clipped > 0 {
-        format!("clipped                       {} pixels above the display maximum\n", stats.clipped)
+        format!(
+            "clipped                       {} pixels above the display maximum\n",
+            stats.clipped
+        )
     } else {
         String::new()
     }

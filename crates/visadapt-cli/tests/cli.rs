@@ -9,7 +9,9 @@ fn visadapt() -> Command {
 }
 
 fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../visadapt/tests/data").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../visadapt/tests/data")
+        .join(name)
 }
 
 /// Eq. 4, written out independently of the library.
@@ -46,7 +48,10 @@ fn one_line_error(stderr: &[u8]) -> String {
 
 #[test]
 fn observer_json_has_the_documented_keys_and_values() {
-    let out = visadapt().args(["observer", "0.001", "--json"]).output().unwrap();
+    let out = visadapt()
+        .args(["observer", "0.001", "--json"])
+        .output()
+        .unwrap();
     assert!(out.status.success());
     let v = json(&out.stdout);
     for key in [
@@ -98,12 +103,21 @@ fn map_writes_png_and_reports() {
         .arg("--json")
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v = json(&out.stdout);
     let lwa = v["adaptation_cd_m2"].as_f64().unwrap();
     assert!((v["highest_visible_cd_m2"].as_f64().unwrap() / 2.0 - lwa).abs() < 1e-9 * lwa);
     assert!((v["photopic_scale"].as_f64().unwrap() / (tp(40.0) / tp(lwa)) - 1.0).abs() < 1e-9);
-    for key in ["rod_weight", "acuity_cycles_per_degree", "blur_sigma_px", "scotopic_scale"] {
+    for key in [
+        "rod_weight",
+        "acuity_cycles_per_degree",
+        "blur_sigma_px",
+        "scotopic_scale",
+    ] {
         assert!(v.get(key).is_some(), "missing {key}");
     }
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
@@ -116,7 +130,11 @@ fn map_writes_png_and_reports() {
 #[test]
 fn map_other_outputs() {
     let dir = tempfile::tempdir().unwrap();
-    for (name, extra) in [("a.png", vec!["--bits", "16"]), ("b.jpg", vec![]), ("c.exr", vec![])] {
+    for (name, extra) in [
+        ("a.png", vec!["--bits", "16"]),
+        ("b.jpg", vec![]),
+        ("c.exr", vec![]),
+    ] {
         let p = dir.path().join(name);
         visadapt()
             .arg("map")
@@ -131,7 +149,10 @@ fn map_other_outputs() {
     let decoder = png::Decoder::new(std::io::BufReader::new(
         std::fs::File::open(dir.path().join("a.png")).unwrap(),
     ));
-    assert_eq!(decoder.read_info().unwrap().info().bit_depth, png::BitDepth::Sixteen);
+    assert_eq!(
+        decoder.read_info().unwrap().info().bit_depth,
+        png::BitDepth::Sixteen
+    );
 }
 
 #[test]
@@ -147,7 +168,9 @@ fn map_text_report_names_what_it_used() {
         .success()
         .stdout(predicate::str::contains("world adaptation"))
         .stdout(predicate::str::contains("2.5000e-2 cd/m²"))
-        .stdout(predicate::str::contains("angular fisheye 180.0 deg (from the file)"))
+        .stdout(predicate::str::contains(
+            "angular fisheye 180.0 deg (from the file)",
+        ))
         .stdout(predicate::str::contains("rod weight k"));
 }
 
@@ -162,7 +185,11 @@ fn bad_input_fails_cleanly() {
     let garbage = dir.path().join("garbage.exr");
     std::fs::write(&garbage, b"this is not an image at all").unwrap();
     let huge = dir.path().join("huge.hdr");
-    std::fs::write(&huge, b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2000000000 +X 2000000000\n").unwrap();
+    std::fs::write(
+        &huge,
+        b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2000000000 +X 2000000000\n",
+    )
+    .unwrap();
     let empty = dir.path().join("empty.pfm");
     std::fs::write(&empty, b"").unwrap();
     let keep = dir.path().join("keep.png");
@@ -176,7 +203,13 @@ fn bad_input_fails_cleanly() {
         (empty.clone(), "empty.pfm"),
     ] {
         let before = files_in(dir.path());
-        let out = visadapt().arg("map").arg(&input).arg("-o").arg(&keep).output().unwrap();
+        let out = visadapt()
+            .arg("map")
+            .arg(&input)
+            .arg("-o")
+            .arg(&keep)
+            .output()
+            .unwrap();
         assert!(!out.status.success(), "{what}");
         let e = one_line_error(&out.stderr);
         assert!(e.contains(what), "{e}");
@@ -184,7 +217,13 @@ fn bad_input_fails_cleanly() {
         assert_eq!(std::fs::read(&keep).unwrap(), b"precious");
     }
     // The limit is a flag: raising it lets a large (here: truncated) file be tried.
-    let out = visadapt().arg("map").arg(&huge).arg("-o").arg(&keep).output().unwrap();
+    let out = visadapt()
+        .arg("map")
+        .arg(&huge)
+        .arg("-o")
+        .arg(&keep)
+        .output()
+        .unwrap();
     assert!(String::from_utf8_lossy(&out.stderr).contains("--max-pixels"));
 }
 
@@ -199,7 +238,10 @@ fn bad_arguments_fail_cleanly() {
         (&["-o", "x.png", "--peak", "nan"], "--peak"),
         (&["-o", "x.png", "--display-max", "0"], "display-max"),
         (&["-o", "x.png", "--fov", "0"], "--fov"),
-        (&["-o", "x.png", "--world-adaptation", "-3"], "world-adaptation"),
+        (
+            &["-o", "x.png", "--world-adaptation", "-3"],
+            "world-adaptation",
+        ),
     ];
     for (args, what) in cases {
         let out = visadapt()
@@ -221,7 +263,10 @@ fn bad_arguments_fail_cleanly() {
         .unwrap();
     assert!(!out.status.success());
     assert!(one_line_error(&out.stderr).contains("overwrite the input"));
-    assert_eq!(std::fs::read(&input).unwrap(), std::fs::read(data("mixtex.hdr")).unwrap());
+    assert_eq!(
+        std::fs::read(&input).unwrap(),
+        std::fs::read(data("mixtex.hdr")).unwrap()
+    );
     assert_eq!(files_in(dir.path()), ["in.hdr"]);
 }
 
@@ -233,5 +278,28 @@ fn help_has_examples() {
         .success()
         .stdout(predicate::str::contains("Examples:"))
         .stdout(predicate::str::contains("--peak"));
-    visadapt().arg("--help").assert().success().stdout(predicate::str::contains("observer"));
+    visadapt()
+        .arg("--help")
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("observer"));
+}
+
+/// Outputs are ordinary files (0644), not the private mode of the temporary file they are
+/// written through.
+#[cfg(unix)]
+#[test]
+fn outputs_get_normal_permissions() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("out.png");
+    visadapt()
+        .arg("map")
+        .arg(data("mixtex.hdr"))
+        .arg("-o")
+        .arg(&png)
+        .assert()
+        .success();
+    let mode = std::fs::metadata(&png).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o644);
 }

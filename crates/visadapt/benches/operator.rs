@@ -3,9 +3,9 @@
 //!
 //! `cargo bench -p visadapt --bench operator`
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
-use visadapt::operator::{map, ViewingConditions};
+use visadapt::operator::{ViewingConditions, map};
 use visadapt::{HdrImage, View};
 
 /// A textured HDR frame: smooth gradients times a fine checker, peak about `peak` cd/m²,

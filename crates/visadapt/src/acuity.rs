@@ -32,9 +32,7 @@
 //! growing as the cutoff frequency falls, continuously and monotonically. The report flags
 //! when this fallback is in use.
 
-use crate::tvi::{
-    cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2, ROD_WEBER_OFFSET_LOG,
-};
+use crate::tvi::{ROD_WEBER_OFFSET_LOG, cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
 use std::f64::consts::PI;
 
 /// Ward Larson et al. 1997, Eq. 15: amplitude of the arctangent fit to Shaler (1937).
@@ -188,6 +186,8 @@ mod tests {
             assert!(s >= prev, "blur shrinks at {l}: {s} < {prev}");
             prev = s;
         }
-        assert!(AcuityFilter::new(1e-3, 2.261e-3).sigma_deg > AcuityFilter::new(0.1, 0.2261).sigma_deg);
+        assert!(
+            AcuityFilter::new(1e-3, 2.261e-3).sigma_deg > AcuityFilter::new(0.1, 0.2261).sigma_deg
+        );
     }
 }

@@ -55,7 +55,11 @@ pub fn highest_visible_of<const K: usize>(
     if n == 0 {
         return [0.0; K];
     }
-    let fraction = if fraction.is_nan() { 0.0 } else { fraction.clamp(0.0, 1.0) };
+    let fraction = if fraction.is_nan() {
+        0.0
+    } else {
+        fraction.clamp(0.0, 1.0)
+    };
     // Number of samples allowed above the answer; the answer is the sample of rank
     // `n - 1 - allowed` in ascending order.
     let allowed = ((n as f64) * fraction).floor() as usize;
@@ -94,7 +98,11 @@ const CHUNK: usize = 1 << 20;
 #[inline(always)]
 fn order_bits(v: f32) -> u32 {
     let b = v.to_bits();
-    if b.wrapping_sub(1) < 0x7f7f_ffff { b } else { 0 }
+    if b.wrapping_sub(1) < 0x7f7f_ffff {
+        b
+    } else {
+        0
+    }
 }
 
 /// Fill `keys` with the ordering bit patterns of a block (a loop the compiler vectorises).

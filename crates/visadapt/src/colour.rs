@@ -69,8 +69,10 @@ impl Chromaticities {
 
 /// The inverse of a 3×3 matrix, `None` if it is (nearly) singular.
 pub fn invert(m: &Mat3) -> Option<Mat3> {
-    let c = |r: usize, s: usize| m[(r + 1) % 3][(s + 1) % 3] * m[(r + 2) % 3][(s + 2) % 3]
-        - m[(r + 1) % 3][(s + 2) % 3] * m[(r + 2) % 3][(s + 1) % 3];
+    let c = |r: usize, s: usize| {
+        m[(r + 1) % 3][(s + 1) % 3] * m[(r + 2) % 3][(s + 2) % 3]
+            - m[(r + 1) % 3][(s + 2) % 3] * m[(r + 2) % 3][(s + 1) % 3]
+    };
     let det = m[0][0] * c(0, 0) + m[0][1] * c(0, 1) + m[0][2] * c(0, 2);
     let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
     if !det.is_finite() || det.abs() <= 1e-12 * scale.powi(3) {
@@ -184,7 +186,11 @@ mod tests {
         ];
         for r in 0..3 {
             for c in 0..3 {
-                assert!((m[r][c] - expected[r][c]).abs() < 1.5e-4, "{r},{c}: {}", m[r][c]);
+                assert!(
+                    (m[r][c] - expected[r][c]).abs() < 1.5e-4,
+                    "{r},{c}: {}",
+                    m[r][c]
+                );
             }
         }
     }
@@ -193,7 +199,9 @@ mod tests {
     fn radiance_primaries_have_equal_energy_white() {
         let m = RADIANCE_DEFAULT.rgb_to_xyz().unwrap();
         let w = mul_vec(&m, [1.0, 1.0, 1.0]);
-        assert!((w[0] - 1.0).abs() < 1e-12 && (w[1] - 1.0).abs() < 1e-12 && (w[2] - 1.0).abs() < 1e-12);
+        assert!(
+            (w[0] - 1.0).abs() < 1e-12 && (w[1] - 1.0).abs() < 1e-12 && (w[2] - 1.0).abs() < 1e-12
+        );
     }
 
     #[test]

@@ -75,7 +75,11 @@ impl Error {
     }
 
     /// An [`Error::InvalidParameter`].
-    pub fn invalid(name: &'static str, value: impl fmt::Display, reason: impl Into<String>) -> Self {
+    pub fn invalid(
+        name: &'static str,
+        value: impl fmt::Display,
+        reason: impl Into<String>,
+    ) -> Self {
         Error::InvalidParameter {
             name,
             value: value.to_string(),

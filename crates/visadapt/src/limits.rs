@@ -13,7 +13,9 @@ pub struct Limits {
 
 impl Default for Limits {
     fn default() -> Self {
-        Limits { max_pixels: 1 << 28 }
+        Limits {
+            max_pixels: 1 << 28,
+        }
     }
 }
 

@@ -51,7 +51,11 @@ impl Observer {
             if v.is_finite() && v > 0.0 {
                 Ok(v)
             } else {
-                Err(Error::invalid(name, v, "must be a positive, finite luminance"))
+                Err(Error::invalid(
+                    name,
+                    v,
+                    "must be a positive, finite luminance",
+                ))
             }
         };
         let l = check("adaptation", adaptation_cd_m2)?;
@@ -59,7 +63,10 @@ impl Observer {
             "scotopic",
             scotopic_adaptation_cd_m2.unwrap_or(l * EQUAL_ENERGY_SP_RATIO),
         )?;
-        let dmax = check("display-max", display_max_cd_m2.unwrap_or(DEFAULT_DISPLAY_MAX_CD_M2))?;
+        let dmax = check(
+            "display-max",
+            display_max_cd_m2.unwrap_or(DEFAULT_DISPLAY_MAX_CD_M2),
+        )?;
         let lda = ADAPTATION_FRACTION * dmax;
         Ok(Observer {
             adaptation_cd_m2: l,

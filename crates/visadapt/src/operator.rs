@@ -27,8 +27,7 @@
 
 use crate::acuity::{self, AcuityFilter};
 use crate::adaptation::{
-    highest_visible_of, ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2,
-    DEFAULT_HOT_PIXEL_FRACTION,
+    ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2, DEFAULT_HOT_PIXEL_FRACTION, highest_visible_of,
 };
 use crate::colour::xyz_to_linear_srgb_matrix;
 use crate::mesopic::rod_weight;
@@ -111,9 +110,15 @@ impl ViewingConditions {
             ));
         }
         if let Some(v) = &self.view
-            && !(v.horizontal_deg.is_finite() && v.horizontal_deg > 0.0 && v.horizontal_deg <= 360.0)
+            && !(v.horizontal_deg.is_finite()
+                && v.horizontal_deg > 0.0
+                && v.horizontal_deg <= 360.0)
         {
-            return Err(Error::invalid("fov", v.horizontal_deg, "must be in (0, 360] degrees"));
+            return Err(Error::invalid(
+                "fov",
+                v.horizontal_deg,
+                "must be in (0, 360] degrees",
+            ));
         }
         Ok(())
     }
@@ -282,10 +287,17 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
         Some(l) => (l, Source::Caller),
         None => (ADAPTATION_FRACTION * hv, Source::Image),
     };
-    let lwa_s = match (conditions.world_adaptation_scotopic_cd_m2, conditions.world_adaptation_cd_m2) {
+    let lwa_s = match (
+        conditions.world_adaptation_scotopic_cd_m2,
+        conditions.world_adaptation_cd_m2,
+    ) {
         (Some(s), _) => s,
         (None, Some(l)) => {
-            let ratio = if hv > 0.0 && hv_s > 0.0 { hv_s / hv } else { EQUAL_ENERGY_SP_RATIO };
+            let ratio = if hv > 0.0 && hv_s > 0.0 {
+                hv_s / hv
+            } else {
+                EQUAL_ENERGY_SP_RATIO
+            };
             l * ratio
         }
         (None, None) => ADAPTATION_FRACTION * hv_s,
@@ -472,7 +484,11 @@ fn map_chunk(
     b: &mut [f32],
 ) -> PixelStats {
     let end = start + r.len();
-    let (xs, ys, zs) = (&image.x[start..end], &image.y[start..end], &image.z[start..end]);
+    let (xs, ys, zs) = (
+        &image.x[start..end],
+        &image.y[start..end],
+        &image.z[start..end],
+    );
     let (mut non_finite, mut negative) = (0u32, 0u32);
     // Two copies of one branch-free loop (file scotopic channel, or the XYZ estimate), so
     // that the compiler vectorises each.
@@ -510,7 +526,11 @@ fn map_chunk(
 fn sanitize(v: [f32; 4]) -> (bool, bool, [f32; 4]) {
     let finite = v[0].is_finite() & v[1].is_finite() & v[2].is_finite() & v[3].is_finite();
     let negative = finite & ((v[0] < 0.0) | (v[1] < 0.0) | (v[2] < 0.0) | (v[3] < 0.0));
-    (finite, negative, v.map(|c| if finite { c.max(0.0) } else { 0.0 }))
+    (
+        finite,
+        negative,
+        v.map(|c| if finite { c.max(0.0) } else { 0.0 }),
+    )
 }
 
 impl Coefficients {

@@ -23,10 +23,7 @@ pub fn photopic_scale(world_adaptation_cd_m2: f64, display_adaptation_cd_m2: f64
 
 /// Eq. 3 with Eq. 5 for the world observer and Eq. 4 for the (photopic) display observer:
 /// the scotopic (rod) scale factor, display cd/m² per world scotopic cd/m².
-pub fn scotopic_scale(
-    world_adaptation_scotopic_cd_m2: f64,
-    display_adaptation_cd_m2: f64,
-) -> f64 {
+pub fn scotopic_scale(world_adaptation_scotopic_cd_m2: f64, display_adaptation_cd_m2: f64) -> f64 {
     cone_threshold_cd_m2(display_adaptation_cd_m2)
         / rod_threshold_scotopic_cd_m2(world_adaptation_scotopic_cd_m2)
 }
@@ -52,8 +49,14 @@ mod tests {
         for (l, ltp, lts) in rows {
             let mp = photopic_scale(l, 40.0);
             let ms = scotopic_scale(l, 40.0);
-            assert!((mp / (tp40 / 10f64.powf(ltp)) - 1.0).abs() < 1e-3, "m_p at {l}: {mp}");
-            assert!((ms / (tp40 / 10f64.powf(lts)) - 1.0).abs() < 1e-3, "m_s at {l}: {ms}");
+            assert!(
+                (mp / (tp40 / 10f64.powf(ltp)) - 1.0).abs() < 1e-3,
+                "m_p at {l}: {mp}"
+            );
+            assert!(
+                (ms / (tp40 / 10f64.powf(lts)) - 1.0).abs() < 1e-3,
+                "m_s at {l}: {ms}"
+            );
         }
         // Anchors quoted in the project's model notes: m_p(1) = 6.69, m_s(100) = 0.065.
         assert!((photopic_scale(1.0, 40.0) - 6.69).abs() < 0.01);

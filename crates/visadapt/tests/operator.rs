@@ -1,6 +1,6 @@
 //! The whole operator against values computed independently from the paper's equations.
 
-use visadapt::operator::{map, plan, ViewingConditions};
+use visadapt::operator::{ViewingConditions, map, plan};
 use visadapt::{HdrImage, View};
 
 /// D65 white of luminance 1 in XYZ (CIE 15:2004).
@@ -64,7 +64,10 @@ fn uniform_grey_maps_to_paper_value() {
     let expected = (mp * 1.0 + k * ms * 2.0) / 80.0;
     for ch in [&out.image.r, &out.image.g, &out.image.b] {
         for &v in ch.iter() {
-            assert!((v as f64 / expected - 1.0).abs() < 2e-4, "{v} vs {expected}");
+            assert!(
+                (v as f64 / expected - 1.0).abs() < 2e-4,
+                "{v} vs {expected}"
+            );
         }
     }
 }
@@ -85,7 +88,12 @@ fn output_is_absolute_not_renormalised() {
     }
     // m_s at 0.002 scotopic = t_p(40)/t_s(0.002); white well below the display maximum.
     let expected = (tp(40.0) / tp(0.001) * 0.002 + tp(40.0) / ts(0.002) * 0.004) / 80.0;
-    assert!((a.image.g[0] as f64 / expected - 1.0).abs() < 2e-3, "{} {}", a.image.g[0], expected);
+    assert!(
+        (a.image.g[0] as f64 / expected - 1.0).abs() < 2e-3,
+        "{} {}",
+        a.image.g[0],
+        expected
+    );
     assert!(a.image.g[0] < 1.0);
 }
 
@@ -95,8 +103,15 @@ fn output_is_absolute_not_renormalised() {
 fn colour_survives_daylight_and_fades_at_night() {
     // A saturated red in Rec.709 (linear 0.6, 0.1, 0.05), scaled to a luminance level.
     let rgb = [0.6f64, 0.1, 0.05];
-    let m = [[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]];
-    let xyz: Vec<f32> = m.iter().map(|row| (0..3).map(|j| row[j] * rgb[j]).sum::<f64>() as f32).collect();
+    let m = [
+        [0.4124, 0.3576, 0.1805],
+        [0.2126, 0.7152, 0.0722],
+        [0.0193, 0.1192, 0.9505],
+    ];
+    let xyz: Vec<f32> = m
+        .iter()
+        .map(|row| (0..3).map(|j| row[j] * rgb[j]).sum::<f64>() as f32)
+        .collect();
     let chroma = |level: f32| {
         let mut im = uniform(8, 8, [xyz[0] * level, xyz[1] * level, xyz[2] * level], None);
         // Put a white patch so the adaptation is set by white at 4x the red's level.
@@ -105,9 +120,20 @@ fn colour_survives_daylight_and_fades_at_night() {
             im.y[i] = 4.0 * level;
             im.z[i] = D65[2] * 4.0 * level;
         }
-        let out = map(&im, &ViewingConditions { hot_pixel_fraction: 0.0, ..no_blur() }).unwrap();
+        let out = map(
+            &im,
+            &ViewingConditions {
+                hot_pixel_fraction: 0.0,
+                ..no_blur()
+            },
+        )
+        .unwrap();
         let i = 40;
-        let (r, g, b) = (out.image.r[i] as f64, out.image.g[i] as f64, out.image.b[i] as f64);
+        let (r, g, b) = (
+            out.image.r[i] as f64,
+            out.image.g[i] as f64,
+            out.image.b[i] as f64,
+        );
         ((r - b) / (r + g + b), r / g, out.report.mapping.rod_weight)
     };
     let (_, ratio_day, k_day) = chroma(1000.0);
@@ -117,7 +143,10 @@ fn colour_survives_daylight_and_fades_at_night() {
     let (c_night, _, k_night) = chroma(0.0005);
     assert_eq!(k_night, 1.0);
     let (c_day, _, _) = chroma(1000.0);
-    assert!(c_night < 0.1 * c_day, "night chroma {c_night} vs day {c_day}");
+    assert!(
+        c_night < 0.1 * c_day,
+        "night chroma {c_night} vs day {c_day}"
+    );
 }
 
 /// NaN, infinities and negative values never reach the output and are counted.
@@ -188,10 +217,22 @@ fn view_and_fov() {
 fn invalid_conditions_are_rejected() {
     let im = uniform(2, 2, D65, None);
     for cond in [
-        ViewingConditions { display_max_cd_m2: 0.0, ..Default::default() },
-        ViewingConditions { display_max_cd_m2: f64::NAN, ..Default::default() },
-        ViewingConditions { world_adaptation_cd_m2: Some(-1.0), ..Default::default() },
-        ViewingConditions { hot_pixel_fraction: 1.5, ..Default::default() },
+        ViewingConditions {
+            display_max_cd_m2: 0.0,
+            ..Default::default()
+        },
+        ViewingConditions {
+            display_max_cd_m2: f64::NAN,
+            ..Default::default()
+        },
+        ViewingConditions {
+            world_adaptation_cd_m2: Some(-1.0),
+            ..Default::default()
+        },
+        ViewingConditions {
+            hot_pixel_fraction: 1.5,
+            ..Default::default()
+        },
     ] {
         let e = map(&im, &cond).unwrap_err();
         assert!(matches!(e, visadapt::Error::InvalidParameter { .. }), "{e}");
@@ -222,7 +263,8 @@ fn grating_at_cutoff_is_attenuated_to_threshold_contrast() {
         let mut im = HdrImage::zeros(w, h);
         for j in 0..h {
             for i in 0..w {
-                let l = lwa * (1.0 + 0.5 * (2.0 * std::f64::consts::PI * i as f64 / period_px).sin());
+                let l =
+                    lwa * (1.0 + 0.5 * (2.0 * std::f64::consts::PI * i as f64 / period_px).sin());
                 let k = j * w + i;
                 im.x[k] = (D65[0] as f64 * l) as f32;
                 im.y[k] = l as f32;
@@ -263,7 +305,13 @@ fn grating_at_cutoff_is_attenuated_to_threshold_contrast() {
         let f = 1.0 / period_px;
         let sigma_measured = (-ratio.ln() / (2.0 * std::f64::consts::PI.powi(2) * f * f)).sqrt();
         let sigma = out.report.mapping.blur_sigma_px;
-        assert!((sigma_measured / sigma - 1.0).abs() < 0.02, "L_wa {lwa}: sigma {sigma_measured} vs {sigma}");
-        assert!((ratio - c).abs() < 0.01, "L_wa {lwa}: response {ratio} vs t/L {c}");
+        assert!(
+            (sigma_measured / sigma - 1.0).abs() < 0.02,
+            "L_wa {lwa}: sigma {sigma_measured} vs {sigma}"
+        );
+        assert!(
+            (ratio - c).abs() < 0.01,
+            "L_wa {lwa}: response {ratio} vs t/L {c}"
+        );
     }
 }

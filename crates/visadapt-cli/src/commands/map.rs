@@ -2,7 +2,7 @@
 
 use crate::cli::MapArgs;
 use crate::report;
-use anyhow::{bail, Context};
+use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::Path;
 use visadapt::adaptation::highest_visible;
@@ -14,11 +14,15 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
     refuse_to_overwrite_input(&args.input, &args.output)?;
     let format = output_format(&args)?;
-    for (name, v) in [("--scale", args.scale), ("--peak", args.peak), ("--fov", args.fov)] {
-        if let Some(v) = v {
-            if !(v.is_finite() && v > 0.0) {
-                bail!("invalid {name} {v}: must be a positive, finite number");
-            }
+    for (name, v) in [
+        ("--scale", args.scale),
+        ("--peak", args.peak),
+        ("--fov", args.fov),
+    ] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            bail!("invalid {name} {v}: must be a positive, finite number");
         }
     }
     let conditions = ViewingConditions {
@@ -36,16 +40,21 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
         ProgressStyle::with_template("{spinner} [{pos}/{len}] {msg}").expect("valid template"),
     );
     progress.set_message(format!("reading {}", args.input.display()));
-    let limits = Limits { max_pixels: args.max_pixels };
-    let mut image = io::read(&args.input, &limits)
-        .with_context(|| args.input.display().to_string())?;
+    let limits = Limits {
+        max_pixels: args.max_pixels,
+    };
+    let mut image =
+        io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
 
     let scale = match (args.scale, args.peak) {
         (Some(s), _) => s,
         (None, Some(peak)) => {
             let hv = highest_visible(&image.y, args.hot_pixel_fraction) as f64;
             if hv <= 0.0 {
-                bail!("{}: --peak: the image has no visible luminance to rescale", args.input.display());
+                bail!(
+                    "{}: --peak: the image has no visible luminance to rescale",
+                    args.input.display()
+                );
             }
             peak / hv
         }
@@ -63,7 +72,9 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
         image.scale(scale as f32);
     }
     let conditions = ViewingConditions {
-        view: args.fov.map(|fov| View::perspective(fov, image.width, image.height)),
+        view: args
+            .fov
+            .map(|fov| View::perspective(fov, image.width, image.height)),
         ..conditions
     };
 
@@ -72,10 +83,18 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     let out = operator::map(&image, &conditions)?;
     let stats = out.stats;
     if stats.non_finite > 0 {
-        log::warn!("{}: {} pixels with NaN or infinite values shown black", args.input.display(), stats.non_finite);
+        log::warn!(
+            "{}: {} pixels with NaN or infinite values shown black",
+            args.input.display(),
+            stats.non_finite
+        );
     }
     if stats.negative > 0 {
-        log::warn!("{}: {} pixels with negative values, read as 0", args.input.display(), stats.negative);
+        log::warn!(
+            "{}: {} pixels with negative values, read as 0",
+            args.input.display(),
+            stats.negative
+        );
     }
 
     progress.inc(1);
@@ -85,7 +104,10 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     progress.finish_and_clear();
 
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report::map_json(&out.report, &stats, scale))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report::map_json(&out.report, &stats, scale))?
+        );
     } else {
         print!("{}", report::map_text(&out.report, &stats));
         println!("wrote                         {}", args.output.display());
@@ -96,17 +118,19 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
 fn output_format(args: &MapArgs) -> anyhow::Result<OutputFormat> {
     Ok(match OutputFormat::from_path(&args.output)? {
         OutputFormat::Png { .. } => OutputFormat::Png { bits: args.bits },
-        OutputFormat::Jpeg { .. } => OutputFormat::Jpeg { quality: args.quality },
+        OutputFormat::Jpeg { .. } => OutputFormat::Jpeg {
+            quality: args.quality,
+        },
         f => f,
     })
 }
 
 /// The output must never replace the input.
 fn refuse_to_overwrite_input(input: &Path, output: &Path) -> anyhow::Result<()> {
-    if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize()) {
-        if a == b {
-            bail!("{}: output would overwrite the input", output.display());
-        }
+    if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize())
+        && a == b
+    {
+        bail!("{}: output would overwrite the input", output.display());
     }
     Ok(())
 }

@@ -7,7 +7,10 @@ use visadapt::observer::Observer;
 pub fn run(args: ObserverArgs) -> anyhow::Result<()> {
     let o = Observer::new(args.adaptation, args.scotopic, Some(args.display_max))?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report::observer_json(&o))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report::observer_json(&o))?
+        );
     } else {
         print!("{}", report::observer_text(&o));
     }

@@ -42,7 +42,13 @@ pub fn write_png(image: &DisplayImage, bits: u8, w: impl Write) -> Result<()> {
             }
             out
         }
-        _ => return Err(Error::invalid("bit-depth", bits, "PNG output supports 8 or 16 bits")),
+        _ => {
+            return Err(Error::invalid(
+                "bit-depth",
+                bits,
+                "PNG output supports 8 or 16 bits",
+            ));
+        }
     };
     let mut writer = enc.write_header().map_err(png_error)?;
     writer.write_image_data(&data).map_err(png_error)?;
@@ -54,22 +60,34 @@ pub fn write_jpeg(image: &DisplayImage, quality: u8, w: impl Write) -> Result<()
     if !(1..=100).contains(&quality) {
         return Err(Error::invalid("quality", quality, "must be 1 to 100"));
     }
-    let too_big = || Error::Unsupported(format!(
-        "JPEG cannot hold {}x{} pixels (at most 65535 per side)",
-        image.width, image.height
-    ));
+    let too_big = || {
+        Error::Unsupported(format!(
+            "JPEG cannot hold {}x{} pixels (at most 65535 per side)",
+            image.width, image.height
+        ))
+    };
     let width = u16::try_from(image.width).map_err(|_| too_big())?;
     let height = u16::try_from(image.height).map_err(|_| too_big())?;
     let enc = jpeg_encoder::Encoder::new(w, quality);
-    enc.encode(&to_srgb8(image), width, height, jpeg_encoder::ColorType::Rgb)
-        .map_err(|e| match e {
-            jpeg_encoder::EncodingError::IoError(e) => Error::Io(e),
-            other => Error::Unsupported(format!("JPEG encoder: {other}")),
-        })
+    enc.encode(
+        &to_srgb8(image),
+        width,
+        height,
+        jpeg_encoder::ColorType::Rgb,
+    )
+    .map_err(|e| match e {
+        jpeg_encoder::EncodingError::IoError(e) => Error::Io(e),
+        other => Error::Unsupported(format!("JPEG encoder: {other}")),
+    })
 }
 
 fn dims_u32(image: &DisplayImage) -> Result<(u32, u32)> {
-    let bad = || Error::Unsupported(format!("{}x{} is too large for PNG", image.width, image.height));
+    let bad = || {
+        Error::Unsupported(format!(
+            "{}x{} is too large for PNG",
+            image.width, image.height
+        ))
+    };
     Ok((
         u32::try_from(image.width).map_err(|_| bad())?,
         u32::try_from(image.height).map_err(|_| bad())?,
@@ -102,6 +120,16 @@ pub fn write_atomically(
         let mut w = std::io::BufWriter::new(tmp.as_file());
         write(&mut w)?;
         w.flush()?;
+    }
+    // The temporary file is private (0600); give the result the permissions of the file
+    // it replaces, or the usual 0644 of a new file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let perms = std::fs::metadata(path)
+            .map(|m| m.permissions())
+            .unwrap_or_else(|_| std::fs::Permissions::from_mode(0o644));
+        tmp.as_file().set_permissions(perms)?;
     }
     tmp.as_file().sync_all()?;
     tmp.persist(path).map_err(|e| Error::Io(e.error))?;

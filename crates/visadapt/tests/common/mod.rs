@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 /// A file committed under `crates/visadapt/tests/data/`.
 pub fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
 }
 
 /// A file of the project's shared data set (`../shared/data/` beside the repository, or
