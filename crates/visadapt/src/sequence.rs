@@ -358,6 +358,16 @@ impl ApngWriter {
             ));
         }
         writer.finish().map_err(png_error)?;
+        // As `io::display::write_atomically`: the permissions of the file replaced, or the
+        // usual 0644 of a new file, not the temporary file's private 0600.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let perms = std::fs::metadata(&path)
+                .map(|m| m.permissions())
+                .unwrap_or_else(|_| std::fs::Permissions::from_mode(0o644));
+            tmp.as_file().set_permissions(perms)?;
+        }
         tmp.as_file().sync_all()?;
         tmp.persist(&path).map_err(|e| Error::Io(e.error))?;
         Ok(())

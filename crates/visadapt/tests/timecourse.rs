@@ -647,6 +647,12 @@ fn apng_writer_streams_frames_atomically() {
         n += 1;
     }
     assert_eq!(n, 3);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o644, "{mode:o}");
+    }
     // A wrong-sized frame is refused; an unfinished animation leaves no file.
     let bad = dir.path().join("b.png");
     let mut apng = ApngWriter::create(&bad, w, h, 3, 500).unwrap();
