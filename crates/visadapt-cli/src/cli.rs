@@ -9,7 +9,12 @@ use std::path::PathBuf;
 /// Adaptation for Realistic Image Synthesis" (SIGGRAPH 1996): loss of contrast, colour and
 /// acuity from daylight down to starlight. Luminances are in cd/m².
 #[derive(Debug, Parser)]
-#[command(name = "visadapt", version, propagate_version = true, max_term_width = 100)]
+#[command(
+    name = "visadapt",
+    version,
+    propagate_version = true,
+    max_term_width = 100
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -77,7 +82,12 @@ pub struct MapArgs {
     pub output: PathBuf,
 
     /// Multiply the input values by S to get cd/m² (e.g. 179 for radiance in W/sr/m²).
-    #[arg(long, allow_negative_numbers = true, value_name = "S", conflicts_with = "peak")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "S",
+        conflicts_with = "peak"
+    )]
     pub scale: Option<f64>,
 
     /// Rescale so that the highest visible luminance is L cd/m² (the paper's "scene
@@ -95,7 +105,12 @@ pub struct MapArgs {
     pub scotopic_adaptation: Option<f64>,
 
     /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
-    #[arg(long, allow_negative_numbers = true, value_name = "L", default_value_t = 80.0)]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "L",
+        default_value_t = 80.0
+    )]
     pub display_max: f64,
 
     /// Horizontal field of view of the image in degrees (perspective). Overrides the
@@ -140,7 +155,12 @@ pub struct ObserverArgs {
     pub scotopic: Option<f64>,
 
     /// Display maximum luminance in cd/m².
-    #[arg(long, value_name = "L", default_value_t = 80.0, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_name = "L",
+        default_value_t = 80.0,
+        allow_negative_numbers = true
+    )]
     pub display_max: f64,
 
     /// Print one JSON object instead of text.
