@@ -213,6 +213,8 @@ fn bad_input_fails_cleanly() {
         assert!(!out.status.success(), "{what}");
         let e = one_line_error(&out.stderr);
         assert!(e.contains(what), "{e}");
+        // The cause is said once, not repeated by the error chain.
+        assert!(e.matches("os error").count() <= 1, "{e}");
         assert_eq!(files_in(dir.path()), before, "{what}: files changed");
         assert_eq!(std::fs::read(&keep).unwrap(), b"precious");
     }

@@ -13,7 +13,7 @@ use std::fmt;
 #[non_exhaustive]
 pub enum Error {
     /// The operating system refused a read or write.
-    #[error("{0}")]
+    #[error(transparent)]
     Io(#[from] std::io::Error),
     /// The data is not a valid file of the format (truncated, corrupt, inconsistent).
     #[error("invalid {format} data: {reason}")]

@@ -148,41 +148,13 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Write one luminance plane (cd/m²) as a single-channel `Y` OpenEXR, 32-bit float, RLE,
-/// with `whiteLuminance` = 1 (the values are cd/m²), atomically. The library's OpenEXR
-/// reader reads it back as a grey image in absolute units.
+/// Write the tolerance plane (cd/m²) as a single-channel `Y` OpenEXR, atomically.
 fn write_luminance_exr(
     path: &Path,
     width: usize,
     height: usize,
     y: Vec<f32>,
 ) -> anyhow::Result<()> {
-    use exr::prelude::*;
-    io::display::write_atomically(path, |w| {
-        let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> =
-            std::iter::once(AnyChannel::new("Y", FlatSamples::F32(y))).collect();
-        let attributes = LayerAttributes {
-            white_luminance: Some(1.0),
-            ..LayerAttributes::default()
-        };
-        let encoding = Encoding {
-            compression: Compression::RLE,
-            blocks: Blocks::ScanLines,
-            line_order: LineOrder::Increasing,
-        };
-        let layer = Layer::new(
-            (width, height),
-            attributes,
-            encoding,
-            AnyChannels::sort(channels),
-        );
-        Image::from_layer(layer)
-            .write()
-            .to_unbuffered(w)
-            .map_err(|e| match e {
-                exr::error::Error::Io(e) => visadapt::Error::Io(e),
-                other => visadapt::Error::Unsupported(format!("OpenEXR writer: {other}")),
-            })
-    })
-    .with_context(|| path.display().to_string())
+    io::display::write_atomically(path, |w| io::exr::write_luminance(width, height, &y, w))
+        .with_context(|| path.display().to_string())
 }

@@ -957,6 +957,20 @@ pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Re
     write_layer(image.width, image.height, channels, None, None, w)
 }
 
+/// Write one luminance plane in cd/m² (e.g. a [`visibility`](crate::visibility) tolerance
+/// map) as a single-channel `Y` OpenEXR, 32-bit float, RLE, with `whiteLuminance` = 1 so
+/// that [`decode`] reads it back as a grey image in absolute units.
+pub fn write_luminance(
+    width: usize,
+    height: usize,
+    y: &[f32],
+    w: impl std::io::Write + std::io::Seek,
+) -> Result<()> {
+    let plane = y.to_vec();
+    check_planes(width, height, &[&plane])?;
+    write_layer(width, height, vec![("Y", plane)], Some(1.0), None, w)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
