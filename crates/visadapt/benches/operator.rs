@@ -5,7 +5,7 @@
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
-use visadapt::operator::{ViewingConditions, map};
+use visadapt::operator::{ViewingConditions, apply_into, map, plan};
 use visadapt::{HdrImage, View};
 
 /// A textured HDR frame: smooth gradients times a fine checker, peak about `peak` cd/m²,
@@ -45,6 +45,21 @@ fn bench(c: &mut Criterion) {
             g.bench_with_input(BenchmarkId::new(name, format!("{w}x{h}")), &im, |b, im| {
                 b.iter(|| map(black_box(im), &cond).unwrap())
             });
+            // The two stages alone, the second writing into reused buffers as a video
+            // loop does (no allocation, no page faults per frame).
+            let stage = format!("{name}_stages");
+            g.bench_with_input(
+                BenchmarkId::new(format!("{stage}/plan"), format!("{w}x{h}")),
+                &im,
+                |b, im| b.iter(|| plan(black_box(im), &cond).unwrap()),
+            );
+            let report = plan(&im, &cond).unwrap();
+            let mut out = map(&im, &cond).unwrap().image;
+            g.bench_with_input(
+                BenchmarkId::new(format!("{stage}/apply_into"), format!("{w}x{h}")),
+                &im,
+                |b, im| b.iter(|| apply_into(black_box(im), &report.mapping, &mut out)),
+            );
         }
     }
     g.finish();
