@@ -5,7 +5,6 @@ use crate::report;
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::Path;
-use visadapt::adaptation::highest_visible;
 use visadapt::io::{self, OutputFormat};
 use visadapt::operator::{self, ViewingConditions};
 use visadapt::{Limits, View};
@@ -46,28 +45,13 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     let mut image =
         io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
 
-    let scale = match (args.scale, args.peak) {
-        (Some(s), _) => s,
-        (None, Some(peak)) => {
-            let hv = highest_visible(&image.y, args.hot_pixel_fraction) as f64;
-            if hv <= 0.0 {
-                bail!(
-                    "{}: --peak: the image has no visible luminance to rescale",
-                    args.input.display()
-                );
-            }
-            peak / hv
-        }
-        (None, None) => {
-            if !image.absolute_units {
-                log::warn!(
-                    "{}: the file does not say its units; its values are taken as cd/m² (use --scale or --peak)",
-                    args.input.display()
-                );
-            }
-            1.0
-        }
-    };
+    let scale = super::input_scale(
+        &args.input,
+        &image,
+        args.scale,
+        args.peak,
+        args.hot_pixel_fraction,
+    )?;
     if scale != 1.0 {
         image.scale(scale as f32);
     }

@@ -7,7 +7,6 @@ use anyhow::{Context, bail};
 use serde_json::json;
 use std::path::Path;
 use visadapt::Limits;
-use visadapt::adaptation::highest_visible;
 use visadapt::io;
 use visadapt::operator::{Source, ViewingConditions};
 use visadapt::visibility::{self, Viewer};
@@ -55,28 +54,13 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     };
     let mut image =
         io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
-    let scale = match (args.scale, args.peak) {
-        (Some(s), _) => s,
-        (None, Some(peak)) => {
-            let hv = highest_visible(&image.y, args.hot_pixel_fraction) as f64;
-            if hv <= 0.0 {
-                bail!(
-                    "{}: --peak: the image has no visible luminance to rescale",
-                    args.input.display()
-                );
-            }
-            peak / hv
-        }
-        (None, None) => {
-            if !image.absolute_units {
-                log::warn!(
-                    "{}: the file does not say its units; its values are taken as cd/m² (use --scale or --peak)",
-                    args.input.display()
-                );
-            }
-            1.0
-        }
-    };
+    let scale = super::input_scale(
+        &args.input,
+        &image,
+        args.scale,
+        args.peak,
+        args.hot_pixel_fraction,
+    )?;
     if scale != 1.0 {
         image.scale(scale as f32);
     }

@@ -9,7 +9,6 @@ use anyhow::{Context, bail};
 use plotters::style::RGBColor;
 use serde_json::{Value, json};
 use std::path::Path;
-use visadapt::adaptation::highest_visible;
 use visadapt::io;
 use visadapt::operator::{Report, ViewingConditions};
 use visadapt::visibility::{self, Difference, POOLING_EXPONENT, Viewer};
@@ -102,30 +101,17 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
 /// The factor that turns both images into cd/m²: `--scale`, or `--peak` over the
 /// reference's highest visible luminance, or 1.
 fn input_scale(args: &VisibleArgs, reference: &HdrImage, test: &HdrImage) -> anyhow::Result<f64> {
-    Ok(match (args.scale, args.peak) {
-        (Some(s), _) => s,
-        (None, Some(peak)) => {
-            let hv = highest_visible(&reference.y, args.hot_pixel_fraction) as f64;
-            if hv <= 0.0 {
-                bail!(
-                    "{}: --peak: the image has no visible luminance to rescale",
-                    args.reference.display()
-                );
-            }
-            peak / hv
-        }
-        (None, None) => {
-            for (path, image) in [(&args.reference, reference), (&args.test, test)] {
-                if !image.absolute_units {
-                    log::warn!(
-                        "{}: the file does not say its units; its values are taken as cd/m² (use --scale or --peak)",
-                        path.display()
-                    );
-                }
-            }
-            1.0
-        }
-    })
+    let scale = super::input_scale(
+        &args.reference,
+        reference,
+        args.scale,
+        args.peak,
+        args.hot_pixel_fraction,
+    )?;
+    if args.scale.is_none() && args.peak.is_none() {
+        super::warn_if_relative(&args.test, test);
+    }
+    Ok(scale)
 }
 
 /// The output must never replace an input.
