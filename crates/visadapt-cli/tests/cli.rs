@@ -1,50 +1,9 @@
 //! The command line, end to end: outputs, reports, and bad input.
 
-use assert_cmd::Command;
+mod common;
+use common::*;
+
 use predicates::prelude::*;
-use std::path::{Path, PathBuf};
-
-fn visadapt() -> Command {
-    Command::cargo_bin("visadapt").unwrap()
-}
-
-fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../visadapt/tests/data")
-        .join(name)
-}
-
-/// Eq. 4, written out independently of the library.
-fn tp(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -2.6 {
-        -0.72
-    } else if x >= 1.9 {
-        x - 1.255
-    } else {
-        (0.249 * x + 0.65).powf(2.7) - 0.72
-    })
-}
-
-fn json(out: &[u8]) -> serde_json::Value {
-    serde_json::from_slice(out).expect("stdout is one JSON value")
-}
-
-fn files_in(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
-
-fn one_line_error(stderr: &[u8]) -> String {
-    let s = String::from_utf8_lossy(stderr).into_owned();
-    assert_eq!(s.trim_end().lines().count(), 1, "not one line: {s:?}");
-    assert!(!s.contains("panicked"), "{s}");
-    s
-}
 
 #[test]
 fn observer_json_has_the_documented_keys_and_values() {

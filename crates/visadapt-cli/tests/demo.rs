@@ -1,22 +1,11 @@
 //! `visadapt demo`, `chart` and `plot`, end to end: the files they write, what they print,
 //! and bad input.
 
-use assert_cmd::Command;
+mod common;
+use common::*;
+
 use predicates::prelude::*;
 use std::path::Path;
-
-fn visadapt() -> Command {
-    Command::cargo_bin("visadapt").unwrap()
-}
-
-fn files_in(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
 
 /// Decode a PNG: (width, height, interleaved 8-bit RGB).
 fn read_png(path: &Path) -> (u32, u32, Vec<u8>) {

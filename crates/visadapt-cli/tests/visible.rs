@@ -1,36 +1,10 @@
 //! `visadapt visible` and `visadapt tolerance`, end to end.
 
-use assert_cmd::Command;
+mod common;
+use common::*;
+
 use std::path::{Path, PathBuf};
 use visadapt::{HdrImage, Limits};
-
-fn visadapt() -> Command {
-    Command::cargo_bin("visadapt").unwrap()
-}
-
-/// Eq. 4, written out independently of the library.
-fn tp(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -2.6 {
-        -0.72
-    } else if x >= 1.9 {
-        x - 1.255
-    } else {
-        (0.249 * x + 0.65).powf(2.7) - 0.72
-    })
-}
-
-/// Eq. 5, written out independently of the library.
-fn ts(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -3.94 {
-        -2.86
-    } else if x >= -1.44 {
-        x - 0.395
-    } else {
-        (0.405 * x + 1.6).powf(2.18) - 2.86
-    })
-}
 
 /// An equal-energy grey field at `l` cd/m² with its scotopic channel (S/P 2.261).
 fn grey(w: usize, h: usize, l: f32) -> HdrImage {
@@ -66,26 +40,6 @@ fn write(dir: &Path, name: &str, image: &HdrImage) -> PathBuf {
     let file = std::fs::File::create(&path).unwrap();
     visadapt::io::exr::write_hdr(image, std::io::BufWriter::new(file)).unwrap();
     path
-}
-
-fn json(out: &[u8]) -> serde_json::Value {
-    serde_json::from_slice(out).expect("stdout is one JSON value")
-}
-
-fn files_in(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
-
-fn one_line_error(stderr: &[u8]) -> String {
-    let s = String::from_utf8_lossy(stderr).into_owned();
-    assert_eq!(s.trim_end().lines().count(), 1, "not one line: {s:?}");
-    assert!(!s.contains("panicked"), "{s}");
-    s
 }
 
 /// A 64×32 grey field at 100 cd/m², and the same with ±3 thresholds of noise (random
