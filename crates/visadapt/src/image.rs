@@ -158,8 +158,9 @@ impl View {
 
 /// What the display shows: linear display RGB (Rec. 709 / sRGB primaries, D65 white),
 /// planar, relative to the display maximum luminance (1.0 = `L_dmax`), each value in
-/// `[0, 1]`.
-#[derive(Debug, Clone, PartialEq)]
+/// `[0, 1]`. `DisplayImage::default()` is an empty image, for buffers that
+/// [`operator::apply_into`](crate::operator::apply_into) fills and reuses.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct DisplayImage {
     /// Width in pixels.
     pub width: usize,

@@ -395,14 +395,7 @@ impl Coefficients {
 /// If the image's planes are inconsistent (check with [`HdrImage::check_consistent`];
 /// [`map`] and [`plan`] do).
 pub fn apply(image: &HdrImage, mapping: &Mapping) -> (DisplayImage, PixelStats) {
-    let mut out = DisplayImage {
-        width: 0,
-        height: 0,
-        r: Vec::new(),
-        g: Vec::new(),
-        b: Vec::new(),
-        display_max_cd_m2: 0.0,
-    };
+    let mut out = DisplayImage::default();
     let stats = apply_into(image, mapping, &mut out);
     (out, stats)
 }

@@ -18,7 +18,7 @@
 //! display image are reused, and each frame is handed to the caller as soon as it is done.
 
 use crate::adaptation::highest_visible;
-use crate::io::display::to_srgb8;
+use crate::io::display::{commit_temp_file, png_error, temp_file_beside, to_srgb8};
 use crate::operator::{self, Mapping, PixelStats, Report, ViewingConditions};
 use crate::timecourse::{Adaptation, check_times};
 use crate::{DisplayImage, Error, HdrImage, Result};
@@ -181,14 +181,7 @@ pub fn render(
         ));
     }
     let mut lit = HdrImage::zeros(0, 0);
-    let mut out = DisplayImage {
-        width: 0,
-        height: 0,
-        r: Vec::new(),
-        g: Vec::new(),
-        b: Vec::new(),
-        display_max_cd_m2: 0.0,
-    };
+    let mut out = DisplayImage::default();
 
     scaled_into(scene, sequence.from_cd_m2 / hv, &mut lit);
     let before = operator::plan(&lit, conditions)?;
@@ -255,13 +248,6 @@ impl std::fmt::Debug for ApngWriter {
     }
 }
 
-fn png_error(e: png::EncodingError) -> Error {
-    match e {
-        png::EncodingError::IoError(e) => Error::Io(e),
-        other => Error::Unsupported(format!("PNG encoder: {other}")),
-    }
-}
-
 impl ApngWriter {
     /// Start an APNG of `frames` frames of `width × height` pixels, each shown for
     /// `delay_ms` milliseconds, looping forever.
@@ -284,14 +270,7 @@ impl ApngWriter {
                 "needs at least one non-empty frame and a positive delay",
             ));
         }
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
-        let tmp = tempfile::Builder::new()
-            .prefix(".visadapt-")
-            .suffix(".tmp")
-            .tempfile_in(dir)?;
+        let tmp = temp_file_beside(path)?;
         let file = tmp.as_file().try_clone()?;
         let mut enc = png::Encoder::new(BufWriter::new(file), w, h);
         enc.set_color(png::ColorType::Rgb);
@@ -358,18 +337,7 @@ impl ApngWriter {
             ));
         }
         writer.finish().map_err(png_error)?;
-        // As `io::display::write_atomically`: the permissions of the file replaced, or the
-        // usual 0644 of a new file, not the temporary file's private 0600.
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            let perms = std::fs::metadata(&path)
-                .map(|m| m.permissions())
-                .unwrap_or_else(|_| std::fs::Permissions::from_mode(0o644));
-            tmp.as_file().set_permissions(perms)?;
-        }
-        tmp.as_file().sync_all()?;
-        tmp.persist(&path).map_err(|e| Error::Io(e.error))?;
+        commit_temp_file(tmp, &path)?;
         Ok(())
     }
 }

@@ -177,14 +177,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     );
     let mut bytes = Vec::new();
     let mut hdr = HdrImage::zeros(0, 0);
-    let mut display = DisplayImage {
-        width: 0,
-        height: 0,
-        r: Vec::new(),
-        g: Vec::new(),
-        b: Vec::new(),
-        display_max_cd_m2: 0.0,
-    };
+    let mut display = DisplayImage::default();
     let mut eye: Option<Adaptation> = None;
     let mut size = None;
     let mut warned_units = false;

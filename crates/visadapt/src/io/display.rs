@@ -94,7 +94,7 @@ fn dims_u32(image: &DisplayImage) -> Result<(u32, u32)> {
     ))
 }
 
-fn png_error(e: png::EncodingError) -> Error {
+pub(crate) fn png_error(e: png::EncodingError) -> Error {
     match e {
         png::EncodingError::IoError(e) => Error::Io(e),
         other => Error::Unsupported(format!("PNG encoder: {other}")),
@@ -108,21 +108,32 @@ pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> Result<()>,
 ) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .prefix(".visadapt-")
-        .suffix(".tmp")
-        .tempfile_in(dir)?;
+    let tmp = temp_file_beside(path)?;
     {
         let mut w = std::io::BufWriter::new(tmp.as_file());
         write(&mut w)?;
         w.flush()?;
     }
-    // The temporary file is private (0600); give the result the permissions of the file
-    // it replaces, or the usual 0644 of a new file.
+    commit_temp_file(tmp, path)
+}
+
+/// A private temporary file in `path`'s directory, to be renamed over `path` by
+/// [`commit_temp_file`] (dropping it instead removes it).
+pub(crate) fn temp_file_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    Ok(tempfile::Builder::new()
+        .prefix(".visadapt-")
+        .suffix(".tmp")
+        .tempfile_in(dir)?)
+}
+
+/// Give a finished temporary file the permissions of the file it replaces (or the usual
+/// 0644 of a new file, not the temporary file's private 0600), flush it to disk and
+/// rename it over `path`.
+pub(crate) fn commit_temp_file(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
