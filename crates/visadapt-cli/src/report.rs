@@ -1,29 +1,9 @@
-//! Text and JSON renderings of what the model used.
+//! Text renderings of what the model used (the JSON ones are the library's
+//! [`visadapt::report`], shared with the Python package and the viewer).
 
-use serde_json::{Value, json};
-use visadapt::Projection;
 use visadapt::observer::Observer;
-use visadapt::operator::{PixelStats, Report, Source};
-
-/// The `observer` JSON object (keys documented in the README).
-pub fn observer_json(o: &Observer) -> Value {
-    json!({
-        "adaptation_cd_m2": o.adaptation_cd_m2,
-        "scotopic_adaptation_cd_m2": o.scotopic_adaptation_cd_m2,
-        "display_max_cd_m2": o.display_max_cd_m2,
-        "display_adaptation_cd_m2": o.display_adaptation_cd_m2,
-        "cone_threshold_cd_m2": o.cone_threshold_cd_m2,
-        "rod_threshold_scotopic_cd_m2": o.rod_threshold_scotopic_cd_m2,
-        "photopic_scale": o.photopic_scale,
-        "scotopic_scale": o.scotopic_scale,
-        "rod_weight": o.rod_weight,
-        "acuity_cycles_per_degree": o.acuity_cycles_per_degree(),
-        "snellen": o.snellen(),
-        "threshold_contrast": o.acuity.threshold_contrast,
-        "acuity_blur_sigma_deg": o.acuity.sigma_deg,
-        "acuity_fallback": o.acuity.fallback,
-    })
-}
+use visadapt::operator::{PixelStats, Report};
+use visadapt::report::{projection_label as projection, source_label as source};
 
 pub fn observer_text(o: &Observer) -> String {
     format!(
@@ -54,65 +34,6 @@ pub fn observer_text(o: &Observer) -> String {
             ""
         },
     )
-}
-
-fn source(s: Source) -> &'static str {
-    match s {
-        Source::Caller => "given",
-        Source::File => "from the file",
-        Source::Image => "from the image",
-        Source::Default => "default",
-    }
-}
-
-fn projection(p: Projection) -> &'static str {
-    match p {
-        Projection::Perspective => "perspective",
-        Projection::AngularFisheye => "angular fisheye",
-        Projection::HemisphericalFisheye => "hemispherical fisheye",
-        Projection::Cylindrical => "cylindrical",
-        Projection::Planisphere => "planisphere",
-        Projection::Parallel => "parallel",
-    }
-}
-
-/// The `map` report as JSON.
-pub fn map_json(r: &Report, stats: &PixelStats, scale_applied: f64) -> Value {
-    let m = &r.mapping;
-    json!({
-        "width": r.width,
-        "height": r.height,
-        "input_scale": scale_applied,
-        "highest_visible_cd_m2": r.highest_visible_cd_m2,
-        "highest_visible_scotopic_cd_m2": r.highest_visible_scotopic_cd_m2,
-        "scotopic_source": source(r.scotopic_source),
-        "adaptation_cd_m2": r.world_adaptation_cd_m2,
-        "adaptation_source": source(r.world_adaptation_source),
-        "scotopic_adaptation_cd_m2": r.world_adaptation_scotopic_cd_m2,
-        "display_adaptation_cd_m2": r.display_adaptation_cd_m2,
-        "display_max_cd_m2": m.display_max_cd_m2,
-        "cone_threshold_cd_m2": r.cone_threshold_cd_m2,
-        "rod_threshold_scotopic_cd_m2": r.rod_threshold_scotopic_cd_m2,
-        "photopic_scale": m.photopic_scale,
-        "scotopic_scale": m.scotopic_scale,
-        "rod_weight": m.rod_weight,
-        "acuity_cycles_per_degree": r.acuity.cutoff_cycles_per_degree,
-        "snellen": r.snellen(),
-        "threshold_contrast": r.acuity.threshold_contrast,
-        "acuity_fallback": r.acuity.fallback,
-        "acuity_blur_sigma_deg": r.acuity.sigma_deg,
-        "acuity_applied": r.acuity_applied,
-        "blur_sigma_px": m.blur_sigma_px,
-        "pixels_per_degree": r.pixels_per_degree,
-        "view": {
-            "projection": projection(r.view.projection),
-            "horizontal_fov_deg": r.view.horizontal_deg,
-            "source": source(r.view_source),
-        },
-        "pixels_non_finite": stats.non_finite,
-        "pixels_negative": stats.negative,
-        "pixels_clipped": stats.clipped,
-    })
 }
 
 pub fn map_text(r: &Report, stats: &PixelStats) -> String {

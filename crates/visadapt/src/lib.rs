@@ -24,6 +24,7 @@
 //! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
 //! | [`visibility`] | thresholds per pixel, differences in JNDs, tolerance map, convergence test | Eq. 4–7, Sec. 6 |
 //! | [`io`] | Radiance, OpenEXR and PFM in; PNG, JPEG and EXR out | — |
+//! | `report` | the JSON reports of the CLI, Python and the viewer (feature `json`) | — |
 //!
 //! Units are in the names: `_cd_m2` is photopic cd/m², `_scotopic_cd_m2` is scotopic cd/m²
 //! (CIE 1951 V'(λ), K'm = 1700 lm/W), `_deg` degrees of visual angle, `_px` pixels.
@@ -42,6 +43,8 @@ mod limits;
 pub mod mesopic;
 pub mod observer;
 pub mod operator;
+#[cfg(feature = "json")]
+pub mod report;
 pub mod scale;
 pub mod scotopic;
 pub mod sequence;

@@ -491,6 +491,45 @@ pub fn tolerance_map(image: &HdrImage, viewer: &Viewer) -> Result<Vec<f32>> {
     Ok(out)
 }
 
+/// The range of a [`tolerance_map`] and its median relative to the pixels' luminance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToleranceSummary {
+    /// Smallest tolerance, cd/m².
+    pub min_cd_m2: f32,
+    /// Median tolerance (the upper median), cd/m².
+    pub median_cd_m2: f32,
+    /// Largest tolerance, cd/m².
+    pub max_cd_m2: f32,
+    /// Median of tolerance / luminance over the pixels with a positive, finite luminance;
+    /// `None` when there is none.
+    pub median_relative: Option<f32>,
+}
+
+impl ToleranceSummary {
+    /// Summarise `tolerance` (from [`tolerance_map`]) of an image whose luminance plane is
+    /// `luminance_cd_m2`. `None` for an empty map or planes of different lengths.
+    pub fn of(tolerance: &[f32], luminance_cd_m2: &[f32]) -> Option<Self> {
+        if tolerance.is_empty() || tolerance.len() != luminance_cd_m2.len() {
+            return None;
+        }
+        let mut sorted = tolerance.to_vec();
+        sorted.sort_unstable_by(f32::total_cmp);
+        let mut relative: Vec<f32> = tolerance
+            .iter()
+            .zip(luminance_cd_m2)
+            .filter(|(_, y)| y.is_finite() && **y > 0.0)
+            .map(|(t, y)| t / y)
+            .collect();
+        relative.sort_unstable_by(f32::total_cmp);
+        Some(ToleranceSummary {
+            min_cd_m2: sorted[0],
+            median_cd_m2: sorted[sorted.len() / 2],
+            max_cd_m2: sorted[sorted.len() - 1],
+            median_relative: relative.get(relative.len() / 2).copied(),
+        })
+    }
+}
+
 /// Both images consistent and of the same size.
 fn check_pair(reference: &HdrImage, test: &HdrImage) -> Result<()> {
     reference.check_consistent()?;

@@ -90,7 +90,7 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     if args.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&report::map_json(&out.report, &stats, scale))?
+            serde_json::to_string_pretty(&visadapt::report::map_json(&out.report, &stats, scale))?
         );
     } else {
         print!("{}", report::map_text(&out.report, &stats));

@@ -9,7 +9,7 @@ pub fn run(args: ObserverArgs) -> anyhow::Result<()> {
     if args.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&report::observer_json(&o))?
+            serde_json::to_string_pretty(&visadapt::report::observer_json(&o))?
         );
     } else {
         print!("{}", report::observer_text(&o));

@@ -3,7 +3,7 @@
 
 use crate::cli::TimecourseArgs;
 use anyhow::bail;
-use serde_json::{Value, json};
+use visadapt::report;
 use visadapt::scotopic::EQUAL_ENERGY_SP_RATIO;
 use visadapt::timecourse::{Moment, course};
 
@@ -48,31 +48,12 @@ pub fn run(args: TimecourseArgs) -> anyhow::Result<()> {
         args.display_max,
     )?;
     if args.json {
-        let v: Vec<Value> = moments.iter().map(moment_json).collect();
-        println!("{}", serde_json::to_string_pretty(&Value::Array(v))?);
+        let v = report::timecourse_json(&moments);
+        println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         print!("{}", text(from, to, args.display_max, &moments));
     }
     Ok(())
-}
-
-/// One moment as a JSON object (keys documented in the README).
-pub fn moment_json(m: &Moment) -> Value {
-    let map = &m.mapping;
-    json!({
-        "t_seconds": m.t_seconds,
-        "cone_threshold_cd_m2": m.cone_threshold_cd_m2,
-        "rod_threshold_scotopic_cd_m2": m.rod_threshold_scotopic_cd_m2,
-        "cone_excess_log": m.cone_excess_log,
-        "rod_excess_log": m.rod_excess_log,
-        "photopic_scale": map.photopic_scale,
-        "scotopic_scale": map.scotopic_scale,
-        "rod_weight": map.rod_weight,
-        "offset_cd_m2": map.photopic_offset_cd_m2 + map.rod_weight * map.scotopic_offset_cd_m2,
-        "photopic_offset_cd_m2": map.photopic_offset_cd_m2,
-        "scotopic_offset_cd_m2": map.scotopic_offset_cd_m2,
-        "acuity_cycles_per_degree": m.acuity_cycles_per_degree,
-    })
 }
 
 fn text(from: f64, to: f64, display_max: f64, moments: &[Moment]) -> String {

@@ -4,12 +4,11 @@
 
 use crate::cli::ToleranceArgs;
 use anyhow::{Context, bail};
-use serde_json::json;
 use std::path::Path;
 use visadapt::Limits;
 use visadapt::io;
 use visadapt::operator::{Source, ViewingConditions};
-use visadapt::visibility::{self, Viewer};
+use visadapt::visibility::{self, ToleranceSummary, Viewer};
 
 pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
@@ -67,43 +66,14 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     let (viewer, report) = Viewer::for_image(&image, &conditions)?;
     let tolerance = visibility::tolerance_map(&image, &viewer)?;
 
-    // Summary: the range of the map, and its median relative to the pixels' luminance.
-    let mut sorted = tolerance.clone();
-    sorted.sort_unstable_by(f32::total_cmp);
-    let (min, median, max) = (
-        sorted[0],
-        sorted[sorted.len() / 2],
-        sorted[sorted.len() - 1],
-    );
-    let mut relative: Vec<f32> = tolerance
-        .iter()
-        .zip(&image.y)
-        .filter(|(_, y)| y.is_finite() && **y > 0.0)
-        .map(|(t, y)| t / y)
-        .collect();
-    relative.sort_unstable_by(f32::total_cmp);
-    let median_relative = relative.get(relative.len() / 2).copied();
-
+    let summary = ToleranceSummary::of(&tolerance, &image.y)
+        .expect("one tolerance per pixel of a non-empty image");
     write_luminance_exr(&args.output, image.width, image.height, tolerance)?;
 
     let given = report.world_adaptation_source == Source::Caller;
     if args.json {
-        let v = json!({
-            "width": image.width,
-            "height": image.height,
-            "adaptation_cd_m2": report.world_adaptation_cd_m2,
-            "adaptation_source": if given { "given" } else { "image" },
-            "scotopic_adaptation_cd_m2": report.world_adaptation_scotopic_cd_m2,
-            "cone_threshold_cd_m2": report.cone_threshold_cd_m2,
-            "rod_threshold_scotopic_cd_m2": report.rod_threshold_scotopic_cd_m2,
-            "rod_weight": report.mapping.rod_weight,
-            "min_tolerance_cd_m2": min,
-            "median_tolerance_cd_m2": median,
-            "max_tolerance_cd_m2": max,
-            "median_relative_tolerance": median_relative,
-            "input_scale": scale,
-            "output": args.output.display().to_string(),
-        });
+        let output = args.output.display().to_string();
+        let v = visadapt::report::tolerance_json(&summary, &report, scale, Some(&output));
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
@@ -119,9 +89,10 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
             report.mapping.rod_weight
         );
         println!(
-            "tolerance                     min {min:.4e}, median {median:.4e}, max {max:.4e} cd/m²"
+            "tolerance                     min {:.4e}, median {:.4e}, max {:.4e} cd/m²",
+            summary.min_cd_m2, summary.median_cd_m2, summary.max_cd_m2
         );
-        if let Some(r) = median_relative {
+        if let Some(r) = summary.median_relative {
             println!(
                 "                              median {:.2} % of the pixel's luminance",
                 100.0 * r

@@ -7,11 +7,10 @@ use crate::cli::VisibleArgs;
 use crate::graphics::{self, PictureFormat};
 use anyhow::{Context, bail};
 use plotters::style::RGBColor;
-use serde_json::{Value, json};
 use std::path::Path;
 use visadapt::io;
 use visadapt::operator::{Report, ViewingConditions};
-use visadapt::visibility::{self, Difference, POOLING_EXPONENT, Viewer};
+use visadapt::visibility::{self, Difference, Viewer};
 use visadapt::{HdrImage, Limits, View};
 
 pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
@@ -87,7 +86,8 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     }
 
     if args.json {
-        let v = json_report(&d, &report, scale, args.output.as_deref());
+        let map = args.output.as_ref().map(|p| p.display().to_string());
+        let v = visadapt::report::difference_json(&d, &report, scale, map.as_deref());
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         print!("{}", text_report(&d, &report));
@@ -124,32 +124,6 @@ fn refuse_to_overwrite(inputs: &[&Path], output: &Path) -> anyhow::Result<()> {
         }
     }
     Ok(())
-}
-
-fn json_report(d: &Difference, r: &Report, scale: f64, map: Option<&Path>) -> Value {
-    json!({
-        "width": d.width,
-        "height": d.height,
-        "visible_fraction": d.visible_fraction,
-        "visible_pixels": (d.visible_fraction * (d.width * d.height) as f64).round() as u64,
-        "mean_jnd": d.mean_jnd,
-        "max_jnd": d.max_jnd,
-        "adaptation_cd_m2": r.world_adaptation_cd_m2,
-        "adaptation_source": if r.world_adaptation_source == visadapt::operator::Source::Caller { "given" } else { "reference image" },
-        "scotopic_adaptation_cd_m2": r.world_adaptation_scotopic_cd_m2,
-        "cone_threshold_cd_m2": r.cone_threshold_cd_m2,
-        "rod_threshold_scotopic_cd_m2": r.rod_threshold_scotopic_cd_m2,
-        "rod_weight": r.mapping.rod_weight,
-        "pooling_exponent": POOLING_EXPONENT,
-        "acuity_cycles_per_degree": r.acuity.cutoff_cycles_per_degree,
-        "acuity_applied": r.acuity_applied,
-        "blur_sigma_px": r.mapping.blur_sigma_px,
-        "pixels_per_degree": r.pixels_per_degree,
-        "horizontal_fov_deg": r.view.horizontal_deg,
-        "input_scale": scale,
-        "non_finite_pixels": d.non_finite_pixels,
-        "map": map.map(|p| p.display().to_string()),
-    })
 }
 
 fn text_report(d: &Difference, r: &Report) -> String {

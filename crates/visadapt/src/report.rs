@@ -1,0 +1,196 @@
+//! Machine-readable renderings of what the model used: the JSON objects that
+//! `visadapt map --json`, `observer --json`, `timecourse --json` and `visible --json`
+//! print, built here once so that the CLI, the Python package and the viewer give the same
+//! keys and the same values.
+//!
+//! Keys carry their units (`_cd_m2`, `_scotopic_cd_m2`, `_deg`, `_px`,
+//! `_cycles_per_degree`, `_seconds`); the README lists them per command. Numbers are the
+//! `f64`s the model computed, printed by `serde_json` in the shortest form that reads back
+//! to the same value.
+//!
+//! Available with the `json` feature (on by default).
+
+use crate::Projection;
+use crate::observer::Observer;
+use crate::operator::{PixelStats, Report, Source};
+use crate::timecourse::Moment;
+use crate::visibility::{Difference, POOLING_EXPONENT, ToleranceSummary};
+use serde_json::{Value, json};
+
+/// How a [`Source`] is named in reports.
+pub fn source_label(s: Source) -> &'static str {
+    match s {
+        Source::Caller => "given",
+        Source::File => "from the file",
+        Source::Image => "from the image",
+        Source::Default => "default",
+    }
+}
+
+/// How a [`Projection`] is named in reports.
+pub fn projection_label(p: Projection) -> &'static str {
+    match p {
+        Projection::Perspective => "perspective",
+        Projection::AngularFisheye => "angular fisheye",
+        Projection::HemisphericalFisheye => "hemispherical fisheye",
+        Projection::Cylindrical => "cylindrical",
+        Projection::Planisphere => "planisphere",
+        Projection::Parallel => "parallel",
+    }
+}
+
+/// The report of one [`operator::map`](crate::operator::map) run (`visadapt map --json`):
+/// adaptation levels, thresholds, scale factors, acuity, view and pixel counts.
+/// `input_scale` is the factor the caller applied to the file's values to get cd/m²
+/// (1 when none).
+///
+/// ```
+/// use visadapt::{HdrImage, operator::{map, ViewingConditions}, report};
+/// let mut scene = HdrImage::zeros(8, 8);
+/// scene.y.fill(10.0);
+/// let out = map(&scene, &ViewingConditions::default())?;
+/// let v = report::map_json(&out.report, &out.stats, 1.0);
+/// assert_eq!(v["adaptation_cd_m2"], 5.0);
+/// assert_eq!(v["view"]["source"], "default");
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
+    let m = &r.mapping;
+    json!({
+        "width": r.width,
+        "height": r.height,
+        "input_scale": input_scale,
+        "highest_visible_cd_m2": r.highest_visible_cd_m2,
+        "highest_visible_scotopic_cd_m2": r.highest_visible_scotopic_cd_m2,
+        "scotopic_source": source_label(r.scotopic_source),
+        "adaptation_cd_m2": r.world_adaptation_cd_m2,
+        "adaptation_source": source_label(r.world_adaptation_source),
+        "scotopic_adaptation_cd_m2": r.world_adaptation_scotopic_cd_m2,
+        "display_adaptation_cd_m2": r.display_adaptation_cd_m2,
+        "display_max_cd_m2": m.display_max_cd_m2,
+        "cone_threshold_cd_m2": r.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": r.rod_threshold_scotopic_cd_m2,
+        "photopic_scale": m.photopic_scale,
+        "scotopic_scale": m.scotopic_scale,
+        "rod_weight": m.rod_weight,
+        "acuity_cycles_per_degree": r.acuity.cutoff_cycles_per_degree,
+        "snellen": r.snellen(),
+        "threshold_contrast": r.acuity.threshold_contrast,
+        "acuity_fallback": r.acuity.fallback,
+        "acuity_blur_sigma_deg": r.acuity.sigma_deg,
+        "acuity_applied": r.acuity_applied,
+        "blur_sigma_px": m.blur_sigma_px,
+        "pixels_per_degree": r.pixels_per_degree,
+        "view": {
+            "projection": projection_label(r.view.projection),
+            "horizontal_fov_deg": r.view.horizontal_deg,
+            "source": source_label(r.view_source),
+        },
+        "pixels_non_finite": stats.non_finite,
+        "pixels_negative": stats.negative,
+        "pixels_clipped": stats.clipped,
+    })
+}
+
+/// What an [`Observer`] adapted to one luminance sees (`visadapt observer --json`).
+pub fn observer_json(o: &Observer) -> Value {
+    json!({
+        "adaptation_cd_m2": o.adaptation_cd_m2,
+        "scotopic_adaptation_cd_m2": o.scotopic_adaptation_cd_m2,
+        "display_max_cd_m2": o.display_max_cd_m2,
+        "display_adaptation_cd_m2": o.display_adaptation_cd_m2,
+        "cone_threshold_cd_m2": o.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": o.rod_threshold_scotopic_cd_m2,
+        "photopic_scale": o.photopic_scale,
+        "scotopic_scale": o.scotopic_scale,
+        "rod_weight": o.rod_weight,
+        "acuity_cycles_per_degree": o.acuity_cycles_per_degree(),
+        "snellen": o.snellen(),
+        "threshold_contrast": o.acuity.threshold_contrast,
+        "acuity_blur_sigma_deg": o.acuity.sigma_deg,
+        "acuity_fallback": o.acuity.fallback,
+    })
+}
+
+/// One [`Moment`] of a time course (an element of `visadapt timecourse --json`). The
+/// offset `offset_cd_m2` is the total Eq. 8 offset `b_p + k·b_s` in display cd/m².
+pub fn moment_json(m: &Moment) -> Value {
+    let map = &m.mapping;
+    json!({
+        "t_seconds": m.t_seconds,
+        "cone_threshold_cd_m2": m.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": m.rod_threshold_scotopic_cd_m2,
+        "cone_excess_log": m.cone_excess_log,
+        "rod_excess_log": m.rod_excess_log,
+        "photopic_scale": map.photopic_scale,
+        "scotopic_scale": map.scotopic_scale,
+        "rod_weight": map.rod_weight,
+        "offset_cd_m2": map.photopic_offset_cd_m2 + map.rod_weight * map.scotopic_offset_cd_m2,
+        "photopic_offset_cd_m2": map.photopic_offset_cd_m2,
+        "scotopic_offset_cd_m2": map.scotopic_offset_cd_m2,
+        "acuity_cycles_per_degree": m.acuity_cycles_per_degree,
+    })
+}
+
+/// A whole time course (`visadapt timecourse --json`): one [`moment_json`] per time.
+pub fn timecourse_json(moments: &[Moment]) -> Value {
+    Value::Array(moments.iter().map(moment_json).collect())
+}
+
+/// The summary of a [`Difference`] between two images (`visadapt visible --json`), with
+/// the observer's `report` (from [`Viewer::for_image`](crate::visibility::Viewer::for_image)
+/// on the reference), the `input_scale` applied to both images and the path of the heat
+/// map written, if any.
+pub fn difference_json(d: &Difference, r: &Report, input_scale: f64, map: Option<&str>) -> Value {
+    json!({
+        "width": d.width,
+        "height": d.height,
+        "visible_fraction": d.visible_fraction,
+        "visible_pixels": (d.visible_fraction * (d.width * d.height) as f64).round() as u64,
+        "mean_jnd": d.mean_jnd,
+        "max_jnd": d.max_jnd,
+        "adaptation_cd_m2": r.world_adaptation_cd_m2,
+        "adaptation_source": if r.world_adaptation_source == Source::Caller { "given" } else { "reference image" },
+        "scotopic_adaptation_cd_m2": r.world_adaptation_scotopic_cd_m2,
+        "cone_threshold_cd_m2": r.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": r.rod_threshold_scotopic_cd_m2,
+        "rod_weight": r.mapping.rod_weight,
+        "pooling_exponent": POOLING_EXPONENT,
+        "acuity_cycles_per_degree": r.acuity.cutoff_cycles_per_degree,
+        "acuity_applied": r.acuity_applied,
+        "blur_sigma_px": r.mapping.blur_sigma_px,
+        "pixels_per_degree": r.pixels_per_degree,
+        "horizontal_fov_deg": r.view.horizontal_deg,
+        "input_scale": input_scale,
+        "non_finite_pixels": d.non_finite_pixels,
+        "map": map,
+    })
+}
+
+/// The summary of a tolerance map (`visadapt tolerance --json`): the observer's `report`
+/// (from [`Viewer::for_image`](crate::visibility::Viewer::for_image)), the map's
+/// [`ToleranceSummary`], the `input_scale` applied to the image and the file the map was
+/// written to, if any.
+pub fn tolerance_json(
+    summary: &ToleranceSummary,
+    r: &Report,
+    input_scale: f64,
+    output: Option<&str>,
+) -> Value {
+    json!({
+        "width": r.width,
+        "height": r.height,
+        "adaptation_cd_m2": r.world_adaptation_cd_m2,
+        "adaptation_source": if r.world_adaptation_source == Source::Caller { "given" } else { "image" },
+        "scotopic_adaptation_cd_m2": r.world_adaptation_scotopic_cd_m2,
+        "cone_threshold_cd_m2": r.cone_threshold_cd_m2,
+        "rod_threshold_scotopic_cd_m2": r.rod_threshold_scotopic_cd_m2,
+        "rod_weight": r.mapping.rod_weight,
+        "min_tolerance_cd_m2": summary.min_cd_m2,
+        "median_tolerance_cd_m2": summary.median_cd_m2,
+        "max_tolerance_cd_m2": summary.max_cd_m2,
+        "median_relative_tolerance": summary.median_relative,
+        "input_scale": input_scale,
+        "output": output,
+    })
+}
