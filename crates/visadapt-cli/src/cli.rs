@@ -57,6 +57,127 @@ pub enum Command {
     Tolerance(ToleranceArgs),
 }
 
+// ---- flag groups shared by several commands (`#[command(flatten)]`) ----
+//
+// Each group is one idea; a command flattens the groups it uses, and
+// [`ViewingArgs::conditions`] is the one place where flags become the library's
+// `ViewingConditions`. New viewing flags go into these groups.
+
+/// How the input's values become cd/m² (map, visible, tolerance).
+#[derive(Debug, Clone, Args)]
+pub struct UnitsArgs {
+    /// Multiply the input values by S to get cd/m² (e.g. 179 for radiance in W/sr/m²).
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "S",
+        conflicts_with = "peak"
+    )]
+    pub scale: Option<f64>,
+
+    /// Rescale so that the highest visible luminance is L cd/m² (the paper's "scene
+    /// illuminated at L cd/m²").
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub peak: Option<f64>,
+}
+
+/// The display the image is shown on (map, observer, timecourse, sequence, video).
+#[derive(Debug, Clone, Args)]
+pub struct DisplayArgs {
+    /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "L",
+        default_value_t = visadapt::adaptation::DEFAULT_DISPLAY_MAX_CD_M2
+    )]
+    pub display_max: f64,
+}
+
+/// The world observer's adaptation, when not derived from the image (map, visible,
+/// tolerance).
+#[derive(Debug, Clone, Args)]
+pub struct WorldAdaptationArgs {
+    /// World adaptation luminance in cd/m² [default: half the highest visible luminance].
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub world_adaptation: Option<f64>,
+
+    /// World rod adaptation in scotopic cd/m² [default: half the highest visible scotopic
+    /// luminance, or the world adaptation times the image's scotopic/photopic ratio].
+    #[arg(long, allow_negative_numbers = true, value_name = "LS")]
+    pub scotopic_adaptation: Option<f64>,
+}
+
+/// The view of the image and the acuity blur (map, visible, sequence, video).
+#[derive(Debug, Clone, Args)]
+pub struct ViewArgs {
+    /// Horizontal field of view of the image in degrees (perspective). Overrides the
+    /// file's VIEW; without either, 60 degrees is assumed.
+    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
+    pub fov: Option<f64>,
+
+    /// Skip the acuity blur (Eq. 7).
+    #[arg(long)]
+    pub no_acuity: bool,
+}
+
+/// Model options every image command has (map, visible, tolerance, sequence, video).
+#[derive(Debug, Clone, Args)]
+pub struct ViewingArgs {
+    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance,
+    /// so that a few hot pixels do not set the adaptation.
+    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
+    pub hot_pixel_fraction: f64,
+}
+
+/// Guards on the input (map, visible, tolerance, sequence, video).
+#[derive(Debug, Clone, Args)]
+pub struct LimitsArgs {
+    /// Largest accepted input in pixels (width x height); guards against corrupt headers.
+    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
+    pub max_pixels: u64,
+}
+
+impl LimitsArgs {
+    /// The library's limits.
+    pub fn limits(&self) -> visadapt::Limits {
+        visadapt::Limits {
+            max_pixels: self.max_pixels,
+        }
+    }
+}
+
+impl ViewingArgs {
+    /// The library's viewing conditions from these flags and the groups a command has
+    /// (`None` for a group it lacks: the library default). The view needs the image's
+    /// size: see [`ViewArgs::view`].
+    pub fn conditions(
+        &self,
+        display: Option<&DisplayArgs>,
+        world: Option<&WorldAdaptationArgs>,
+        view: Option<&ViewArgs>,
+    ) -> visadapt::operator::ViewingConditions {
+        let defaults = visadapt::operator::ViewingConditions::default();
+        visadapt::operator::ViewingConditions {
+            display_max_cd_m2: display.map_or(defaults.display_max_cd_m2, |d| d.display_max),
+            world_adaptation_cd_m2: world.and_then(|w| w.world_adaptation),
+            world_adaptation_scotopic_cd_m2: world.and_then(|w| w.scotopic_adaptation),
+            hot_pixel_fraction: self.hot_pixel_fraction,
+            acuity: view.is_none_or(|v| !v.no_acuity),
+            ..defaults
+        }
+    }
+}
+
+impl ViewArgs {
+    /// The view `--fov` gives an image of `width × height` pixels; `None` to use the
+    /// file's.
+    pub fn view(&self, width: usize, height: usize) -> Option<visadapt::View> {
+        self.fov
+            .map(|fov| visadapt::View::perspective(fov, width, height))
+    }
+}
+
 const MAP_EXAMPLES: &str = "\
 Examples:
   visadapt map scene.hdr -o scene.png
@@ -81,51 +202,20 @@ pub struct MapArgs {
     #[arg(short, long)]
     pub output: PathBuf,
 
-    /// Multiply the input values by S to get cd/m² (e.g. 179 for radiance in W/sr/m²).
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "S",
-        conflicts_with = "peak"
-    )]
-    pub scale: Option<f64>,
+    #[command(flatten)]
+    pub units: UnitsArgs,
 
-    /// Rescale so that the highest visible luminance is L cd/m² (the paper's "scene
-    /// illuminated at L cd/m²").
-    #[arg(long, allow_negative_numbers = true, value_name = "L")]
-    pub peak: Option<f64>,
+    #[command(flatten)]
+    pub world: WorldAdaptationArgs,
 
-    /// World adaptation luminance in cd/m² [default: half the highest visible luminance].
-    #[arg(long, allow_negative_numbers = true, value_name = "L")]
-    pub world_adaptation: Option<f64>,
+    #[command(flatten)]
+    pub display: DisplayArgs,
 
-    /// World rod adaptation in scotopic cd/m² [default: half the highest visible scotopic
-    /// luminance, or the world adaptation times the image's scotopic/photopic ratio].
-    #[arg(long, allow_negative_numbers = true, value_name = "LS")]
-    pub scotopic_adaptation: Option<f64>,
+    #[command(flatten)]
+    pub view: ViewArgs,
 
-    /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "L",
-        default_value_t = 80.0
-    )]
-    pub display_max: f64,
-
-    /// Horizontal field of view of the image in degrees (perspective). Overrides the
-    /// file's VIEW; without either, 60 degrees is assumed.
-    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
-    pub fov: Option<f64>,
-
-    /// Skip the acuity blur (Eq. 7).
-    #[arg(long)]
-    pub no_acuity: bool,
-
-    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance,
-    /// so that a few hot pixels do not set the adaptation.
-    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
-    pub hot_pixel_fraction: f64,
+    #[command(flatten)]
+    pub viewing: ViewingArgs,
 
     /// Bits per channel of PNG output.
     #[arg(long, value_name = "BITS", default_value_t = 8, value_parser = parse_bits)]
@@ -135,9 +225,8 @@ pub struct MapArgs {
     #[arg(long, value_name = "Q", default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
     pub quality: u8,
 
-    /// Largest accepted input in pixels (width x height); guards against corrupt headers.
-    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
-    pub max_pixels: u64,
+    #[command(flatten)]
+    pub limits: LimitsArgs,
 
     /// Print the report as JSON on standard output instead of text.
     #[arg(long)]
@@ -154,14 +243,8 @@ pub struct ObserverArgs {
     #[arg(long, value_name = "LS", allow_negative_numbers = true)]
     pub scotopic: Option<f64>,
 
-    /// Display maximum luminance in cd/m².
-    #[arg(
-        long,
-        value_name = "L",
-        default_value_t = 80.0,
-        allow_negative_numbers = true
-    )]
-    pub display_max: f64,
+    #[command(flatten)]
+    pub display: DisplayArgs,
 
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -274,7 +357,9 @@ Examples:
 
 JND: a difference's photopic and scotopic parts after the acuity Gaussian (Eq. 7), each in
 units of its threshold (Eq. 4 cones, Eq. 5 rods weighted by k of Eq. 6), combined by
-probability summation (exponent 3.5). A pixel is visibly different at 1 JND or more.";
+probability summation (exponent 3.5). A pixel is visibly different at 1 JND or more.
+--scale and --peak rescale both images by one factor (for --peak, the reference's), and the
+observer adapts to the reference (--world-adaptation overrides it).";
 
 const TOLERANCE_EXAMPLES: &str = "\
 Examples:
@@ -298,44 +383,20 @@ pub struct VisibleArgs {
     #[arg(short, long, value_name = "MAP.png")]
     pub output: Option<PathBuf>,
 
-    /// World adaptation luminance in cd/m² [default: half the reference's highest visible
-    /// luminance].
-    #[arg(long, allow_negative_numbers = true, value_name = "L")]
-    pub world_adaptation: Option<f64>,
+    #[command(flatten)]
+    pub world: WorldAdaptationArgs,
 
-    /// World rod adaptation in scotopic cd/m² [default: from the reference, as for `map`].
-    #[arg(long, allow_negative_numbers = true, value_name = "LS")]
-    pub scotopic_adaptation: Option<f64>,
+    #[command(flatten)]
+    pub view: ViewArgs,
 
-    /// Horizontal field of view of the images in degrees (perspective), for the acuity
-    /// Gaussian. Overrides the reference's VIEW; without either, 60 degrees is assumed.
-    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
-    pub fov: Option<f64>,
+    #[command(flatten)]
+    pub units: UnitsArgs,
 
-    /// Ignore acuity (Eq. 7): compare the images at full resolution.
-    #[arg(long)]
-    pub no_acuity: bool,
+    #[command(flatten)]
+    pub viewing: ViewingArgs,
 
-    /// Multiply both images by S to get cd/m².
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "S",
-        conflicts_with = "peak"
-    )]
-    pub scale: Option<f64>,
-
-    /// Rescale both images so that the reference's highest visible luminance is L cd/m².
-    #[arg(long, allow_negative_numbers = true, value_name = "L")]
-    pub peak: Option<f64>,
-
-    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
-    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
-    pub hot_pixel_fraction: f64,
-
-    /// Largest accepted input in pixels (width x height).
-    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
-    pub max_pixels: u64,
+    #[command(flatten)]
+    pub limits: LimitsArgs,
 
     /// Print the result as JSON on standard output instead of text.
     #[arg(long)]
@@ -351,34 +412,17 @@ pub struct ToleranceArgs {
     #[arg(short, long, value_name = "TOL.exr")]
     pub output: PathBuf,
 
-    /// World adaptation luminance in cd/m² [default: half the highest visible luminance].
-    #[arg(long, allow_negative_numbers = true, value_name = "L")]
-    pub world_adaptation: Option<f64>,
+    #[command(flatten)]
+    pub world: WorldAdaptationArgs,
 
-    /// World rod adaptation in scotopic cd/m² [default: from the image, as for `map`].
-    #[arg(long, allow_negative_numbers = true, value_name = "LS")]
-    pub scotopic_adaptation: Option<f64>,
+    #[command(flatten)]
+    pub units: UnitsArgs,
 
-    /// Multiply the input by S to get cd/m².
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "S",
-        conflicts_with = "peak"
-    )]
-    pub scale: Option<f64>,
+    #[command(flatten)]
+    pub viewing: ViewingArgs,
 
-    /// Rescale so that the highest visible luminance is L cd/m².
-    #[arg(long, allow_negative_numbers = true, value_name = "L")]
-    pub peak: Option<f64>,
-
-    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
-    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
-    pub hot_pixel_fraction: f64,
-
-    /// Largest accepted input in pixels (width x height).
-    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
-    pub max_pixels: u64,
+    #[command(flatten)]
+    pub limits: LimitsArgs,
 
     /// Print the summary as JSON on standard output instead of text.
     #[arg(long)]
@@ -427,14 +471,8 @@ pub struct TimecourseArgs {
     #[arg(allow_hyphen_values = true)]
     pub times: Vec<f64>,
 
-    /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "L",
-        default_value_t = 80.0
-    )]
-    pub display_max: f64,
+    #[command(flatten)]
+    pub display: DisplayArgs,
 
     /// Print a JSON array (one object per time) instead of a table.
     #[arg(long)]
@@ -471,31 +509,17 @@ pub struct SequenceArgs {
     #[arg(long, value_name = "MS", default_value_t = 1000)]
     pub apng_delay_ms: u16,
 
-    /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "L",
-        default_value_t = 80.0
-    )]
-    pub display_max: f64,
+    #[command(flatten)]
+    pub display: DisplayArgs,
 
-    /// Horizontal field of view of the image in degrees (perspective) [default: the
-    /// file's VIEW, else 60].
-    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
-    pub fov: Option<f64>,
+    #[command(flatten)]
+    pub view: ViewArgs,
 
-    /// Skip the acuity blur (Eq. 7).
-    #[arg(long)]
-    pub no_acuity: bool,
+    #[command(flatten)]
+    pub viewing: ViewingArgs,
 
-    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
-    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
-    pub hot_pixel_fraction: f64,
-
-    /// Largest accepted input in pixels (width x height).
-    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
-    pub max_pixels: u64,
+    #[command(flatten)]
+    pub limits: LimitsArgs,
 
     /// Print the list of frames as JSON.
     #[arg(long)]
@@ -536,31 +560,17 @@ pub struct VideoArgs {
     #[arg(long, allow_negative_numbers = true, value_name = "S")]
     pub scale: Option<f64>,
 
-    /// Display maximum luminance in cd/m²; the display observer adapts to half of it.
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "L",
-        default_value_t = 80.0
-    )]
-    pub display_max: f64,
+    #[command(flatten)]
+    pub display: DisplayArgs,
 
-    /// Horizontal field of view of the frames in degrees (perspective) [default: the
-    /// file's VIEW, else 60].
-    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
-    pub fov: Option<f64>,
+    #[command(flatten)]
+    pub view: ViewArgs,
 
-    /// Skip the acuity blur (Eq. 7).
-    #[arg(long)]
-    pub no_acuity: bool,
+    #[command(flatten)]
+    pub viewing: ViewingArgs,
 
-    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
-    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
-    pub hot_pixel_fraction: f64,
-
-    /// Largest accepted frame in pixels (width x height).
-    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
-    pub max_pixels: u64,
+    #[command(flatten)]
+    pub limits: LimitsArgs,
 
     /// Print one JSON object per frame (JSON Lines) on standard output as frames are written.
     #[arg(long)]

@@ -71,6 +71,57 @@ impl HdrImage {
         }
     }
 
+    /// The factor that rescales the image so that its highest visible luminance (the
+    /// quantile of Sec. 4.4, [`highest_visible`](crate::adaptation::highest_visible), with
+    /// `hot_pixel_fraction` of the pixels allowed above it) becomes `peak_cd_m2`: the
+    /// paper's "scene illuminated at `peak_cd_m2`" (Sec. 5, Fig. 11).
+    ///
+    /// Errors if `peak_cd_m2` is not positive and finite, or if the image has no visible
+    /// luminance to rescale.
+    ///
+    /// ```
+    /// use visadapt::HdrImage;
+    /// let mut scene = HdrImage::zeros(4, 1);
+    /// scene.y.copy_from_slice(&[1.0, 2.0, 4.0, 8.0]);
+    /// let moonlit = scene.with_peak(0.04, 0.0)?;          // highest visible 8 -> 0.04 cd/m²
+    /// assert!((moonlit.y[3] - 0.04).abs() < 1e-7);
+    /// # Ok::<(), visadapt::Error>(())
+    /// ```
+    pub fn peak_factor(&self, peak_cd_m2: f64, hot_pixel_fraction: f64) -> crate::Result<f64> {
+        if !(peak_cd_m2.is_finite() && peak_cd_m2 > 0.0) {
+            return Err(crate::Error::invalid(
+                "peak",
+                peak_cd_m2,
+                "must be a positive, finite number",
+            ));
+        }
+        if !(0.0..1.0).contains(&hot_pixel_fraction) {
+            return Err(crate::Error::invalid(
+                "hot-pixel-fraction",
+                hot_pixel_fraction,
+                "must be in [0, 1)",
+            ));
+        }
+        let highest = crate::adaptation::highest_visible(&self.y, hot_pixel_fraction) as f64;
+        if !(highest.is_finite() && highest > 0.0) {
+            return Err(crate::Error::invalid(
+                "peak",
+                peak_cd_m2,
+                "the image has no visible luminance to rescale",
+            ));
+        }
+        Ok(peak_cd_m2 / highest)
+    }
+
+    /// The image rescaled by [`peak_factor`](Self::peak_factor): lit so that its highest
+    /// visible luminance is `peak_cd_m2`. The result's values are absolute cd/m².
+    pub fn with_peak(mut self, peak_cd_m2: f64, hot_pixel_fraction: f64) -> crate::Result<Self> {
+        let factor = self.peak_factor(peak_cd_m2, hot_pixel_fraction)?;
+        self.scale(factor as f32);
+        self.absolute_units = true;
+        Ok(self)
+    }
+
     /// Check that every plane has `width × height` samples.
     pub fn check_consistent(&self) -> crate::Result<()> {
         let n = self.len();
@@ -185,5 +236,43 @@ impl DisplayImage {
     /// True if the image has no pixels.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn with_peak_rescales_the_highest_visible_luminance() {
+        // 1000 pixels, one hot pixel at 1e6: with the default 0.1 % allowed above, the
+        // highest visible luminance is the largest of the others, 998.
+        let mut scene = HdrImage::zeros(1000, 1);
+        for (i, v) in scene.y.iter_mut().enumerate() {
+            *v = i as f32;
+        }
+        scene.y[999] = 1e6;
+        scene.x = scene.y.clone();
+        let f = scene.peak_factor(0.05, 1e-3).unwrap();
+        assert!((f - 0.05 / 998.0).abs() < 1e-12, "{f}");
+        let lit = scene.clone().with_peak(0.05, 1e-3).unwrap();
+        assert!((lit.y[998] as f64 - 0.05).abs() < 1e-8);
+        assert!((lit.x[500] as f64 - 500.0 * 0.05 / 998.0).abs() < 1e-8);
+        assert!(lit.absolute_units);
+    }
+
+    #[test]
+    fn with_peak_refuses_what_it_cannot_do() {
+        let dark = HdrImage::zeros(4, 4);
+        assert!(matches!(
+            dark.peak_factor(1.0, 0.0),
+            Err(crate::Error::InvalidParameter { name: "peak", .. })
+        ));
+        let mut lit = HdrImage::zeros(4, 4);
+        lit.y.fill(1.0);
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert!(lit.peak_factor(bad, 0.0).is_err(), "{bad}");
+        }
+        assert!(lit.peak_factor(1.0, 1.0).is_err());
     }
 }

@@ -7,58 +7,33 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::Path;
 use visadapt::io::{self, OutputFormat};
 use visadapt::operator::{self, ViewingConditions};
-use visadapt::{Limits, View};
 
 pub fn run(args: MapArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
     refuse_to_overwrite_input(&args.input, &args.output)?;
     let format = output_format(&args)?;
-    for (name, v) in [
-        ("--scale", args.scale),
-        ("--peak", args.peak),
-        ("--fov", args.fov),
-    ] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0)
-        {
-            bail!("invalid {name} {v}: must be a positive, finite number");
-        }
-    }
-    let conditions = ViewingConditions {
-        display_max_cd_m2: args.display_max,
-        world_adaptation_cd_m2: args.world_adaptation,
-        world_adaptation_scotopic_cd_m2: args.scotopic_adaptation,
-        hot_pixel_fraction: args.hot_pixel_fraction,
-        acuity: !args.no_acuity,
-        view: None,
-        ..ViewingConditions::default()
-    };
+    args.units.validate()?;
+    args.view.validate()?;
+    let conditions =
+        args.viewing
+            .conditions(Some(&args.display), Some(&args.world), Some(&args.view));
     conditions.validate()?;
 
     let progress = ProgressBar::new(3).with_style(
         ProgressStyle::with_template("{spinner} [{pos}/{len}] {msg}").expect("valid template"),
     );
     progress.set_message(format!("reading {}", args.input.display()));
-    let limits = Limits {
-        max_pixels: args.max_pixels,
-    };
-    let mut image =
-        io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
+    let mut image = io::read(&args.input, &args.limits.limits())
+        .with_context(|| args.input.display().to_string())?;
 
-    let scale = super::input_scale(
-        &args.input,
-        &image,
-        args.scale,
-        args.peak,
-        args.hot_pixel_fraction,
-    )?;
+    let scale = args
+        .units
+        .factor(&args.input, &image, conditions.hot_pixel_fraction)?;
     if scale != 1.0 {
         image.scale(scale as f32);
     }
     let conditions = ViewingConditions {
-        view: args
-            .fov
-            .map(|fov| View::perspective(fov, image.width, image.height)),
+        view: args.view.view(image.width, image.height),
         ..conditions
     };
 

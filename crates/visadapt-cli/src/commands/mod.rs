@@ -10,37 +10,64 @@ pub mod tolerance;
 pub mod video;
 pub mod visible;
 
+use crate::cli::{UnitsArgs, ViewArgs};
 use anyhow::bail;
 use std::path::Path;
 use visadapt::HdrImage;
-use visadapt::adaptation::highest_visible;
 
-/// The factor that turns an input's values into cd/m²: `--scale S`, or `--peak L` over its
-/// highest visible luminance, or 1 (with a warning when the file does not state its units).
-pub fn input_scale(
-    path: &Path,
-    image: &HdrImage,
-    scale: Option<f64>,
-    peak: Option<f64>,
-    hot_pixel_fraction: f64,
-) -> anyhow::Result<f64> {
-    Ok(match (scale, peak) {
-        (Some(s), _) => s,
-        (None, Some(peak)) => {
-            let hv = highest_visible(&image.y, hot_pixel_fraction) as f64;
-            if hv <= 0.0 {
-                bail!(
-                    "{}: --peak: the image has no visible luminance to rescale",
-                    path.display()
-                );
+/// `--name v` must be a positive, finite number.
+pub fn positive_flag(name: &str, value: Option<f64>) -> anyhow::Result<()> {
+    if let Some(v) = value
+        && !(v.is_finite() && v > 0.0)
+    {
+        bail!("invalid {name} {v}: must be a positive, finite number");
+    }
+    Ok(())
+}
+
+impl UnitsArgs {
+    /// Check the flags before any file is read.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        positive_flag("--scale", self.scale)?;
+        positive_flag("--peak", self.peak)
+    }
+
+    /// The factor that turns an input's values into cd/m²: `--scale S`, or `--peak L` over
+    /// its highest visible luminance ([`HdrImage::peak_factor`]), or 1 (with a warning when
+    /// the file does not state its units).
+    pub fn factor(
+        &self,
+        path: &Path,
+        image: &HdrImage,
+        hot_pixel_fraction: f64,
+    ) -> anyhow::Result<f64> {
+        Ok(match (self.scale, self.peak) {
+            (Some(s), _) => s,
+            (None, Some(peak)) => match image.peak_factor(peak, hot_pixel_fraction) {
+                Ok(f) => f,
+                Err(visadapt::Error::InvalidParameter { reason, .. }) => {
+                    bail!("{}: --peak: {reason}", path.display())
+                }
+                Err(e) => return Err(e.into()),
+            },
+            (None, None) => {
+                warn_if_relative(path, image);
+                1.0
             }
-            peak / hv
-        }
-        (None, None) => {
-            warn_if_relative(path, image);
-            1.0
-        }
-    })
+        })
+    }
+
+    /// True when neither `--scale` nor `--peak` is given.
+    pub fn is_unset(&self) -> bool {
+        self.scale.is_none() && self.peak.is_none()
+    }
+}
+
+impl ViewArgs {
+    /// Check the flags before any file is read.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        positive_flag("--fov", self.fov)
+    }
 }
 
 /// Warn that a file without stated units is read as cd/m².

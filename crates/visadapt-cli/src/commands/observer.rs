@@ -5,7 +5,11 @@ use crate::report;
 use visadapt::observer::Observer;
 
 pub fn run(args: ObserverArgs) -> anyhow::Result<()> {
-    let o = Observer::new(args.adaptation, args.scotopic, Some(args.display_max))?;
+    let o = Observer::new(
+        args.adaptation,
+        args.scotopic,
+        Some(args.display.display_max),
+    )?;
     if args.json {
         println!(
             "{}",

@@ -8,7 +8,6 @@ use std::path::PathBuf;
 use visadapt::io;
 use visadapt::operator::ViewingConditions;
 use visadapt::sequence::{ApngWriter, Sequence, render};
-use visadapt::{Limits, View};
 
 /// File name of frame `index` of `count`: `frame_000.png`, zero-padded to at least 3 digits.
 pub fn frame_name(index: usize, count: usize) -> String {
@@ -20,31 +19,20 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
     let from = positive("--from", args.from)?;
     let to = positive("--to", args.to)?;
     sorted_times(&args.times)?;
-    if let Some(fov) = args.fov
-        && !(fov.is_finite() && fov > 0.0)
-    {
-        bail!("invalid --fov {fov}: must be a positive, finite number");
-    }
+    args.view.validate()?;
     if args.apng_delay_ms == 0 {
         bail!("invalid --apng-delay-ms 0: must be at least 1");
     }
     let sequence = Sequence::new(from, to, args.times.clone())?;
-    let conditions = ViewingConditions {
-        display_max_cd_m2: args.display_max,
-        hot_pixel_fraction: args.hot_pixel_fraction,
-        acuity: !args.no_acuity,
-        ..ViewingConditions::default()
-    };
+    let conditions = args
+        .viewing
+        .conditions(Some(&args.display), None, Some(&args.view));
     conditions.validate()?;
 
-    let limits = Limits {
-        max_pixels: args.max_pixels,
-    };
-    let scene = io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
+    let scene = io::read(&args.input, &args.limits.limits())
+        .with_context(|| args.input.display().to_string())?;
     let conditions = ViewingConditions {
-        view: args
-            .fov
-            .map(|fov| View::perspective(fov, scene.width, scene.height)),
+        view: args.view.view(scene.width, scene.height),
         ..conditions
     };
     std::fs::create_dir_all(&args.output).with_context(|| {

@@ -33,10 +33,10 @@ pub fn sorted_times(times: &[f64]) -> anyhow::Result<()> {
 pub fn run(args: TimecourseArgs) -> anyhow::Result<()> {
     let from = positive("--from", args.from)?;
     let to = positive("--to", args.to)?;
-    if !(args.display_max.is_finite() && args.display_max > 0.0) {
+    if !(args.display.display_max.is_finite() && args.display.display_max > 0.0) {
         bail!(
             "invalid --display-max {}: must be a positive, finite number",
-            args.display_max
+            args.display.display_max
         );
     }
     sorted_times(&args.times)?;
@@ -45,13 +45,13 @@ pub fn run(args: TimecourseArgs) -> anyhow::Result<()> {
         (from, from * sp),
         (to, to * sp),
         &args.times,
-        args.display_max,
+        args.display.display_max,
     )?;
     if args.json {
         let v = report::timecourse_json(&moments);
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        print!("{}", text(from, to, args.display_max, &moments));
+        print!("{}", text(from, to, args.display.display_max, &moments));
     }
     Ok(())
 }

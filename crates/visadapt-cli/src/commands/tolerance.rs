@@ -5,7 +5,6 @@
 use crate::cli::ToleranceArgs;
 use anyhow::{Context, bail};
 use std::path::Path;
-use visadapt::Limits;
 use visadapt::io;
 use visadapt::operator::{Source, ViewingConditions};
 use visadapt::visibility::{self, ToleranceSummary, Viewer};
@@ -31,35 +30,19 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
             args.output.display()
         );
     }
-    for (name, v) in [("--scale", args.scale), ("--peak", args.peak)] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0)
-        {
-            bail!("invalid {name} {v}: must be a positive, finite number");
-        }
-    }
+    args.units.validate()?;
     let conditions = ViewingConditions {
-        world_adaptation_cd_m2: args.world_adaptation,
-        world_adaptation_scotopic_cd_m2: args.scotopic_adaptation,
-        hot_pixel_fraction: args.hot_pixel_fraction,
         // The tolerance holds for errors of any extent; acuity does not enter it.
         acuity: false,
-        ..ViewingConditions::default()
+        ..args.viewing.conditions(None, Some(&args.world), None)
     };
     conditions.validate()?;
 
-    let limits = Limits {
-        max_pixels: args.max_pixels,
-    };
-    let mut image =
-        io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
-    let scale = super::input_scale(
-        &args.input,
-        &image,
-        args.scale,
-        args.peak,
-        args.hot_pixel_fraction,
-    )?;
+    let mut image = io::read(&args.input, &args.limits.limits())
+        .with_context(|| args.input.display().to_string())?;
+    let scale = args
+        .units
+        .factor(&args.input, &image, conditions.hot_pixel_fraction)?;
     if scale != 1.0 {
         image.scale(scale as f32);
     }

@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use visadapt::io::{self, InputFormat, OutputFormat, radiance};
 use visadapt::operator::{self, ViewingConditions};
 use visadapt::timecourse::Adaptation;
-use visadapt::{DisplayImage, HdrImage, Limits, View};
+use visadapt::{DisplayImage, HdrImage, Limits};
 
 /// A parsed frame pattern: `dir/prefix%0Ndsuffix`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -128,19 +128,11 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             args.fps
         );
     }
-    for (name, v) in [("--scale", args.scale), ("--fov", args.fov)] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0)
-        {
-            bail!("invalid {name} {v}: must be a positive, finite number");
-        }
-    }
-    let conditions = ViewingConditions {
-        display_max_cd_m2: args.display_max,
-        hot_pixel_fraction: args.hot_pixel_fraction,
-        acuity: !args.no_acuity,
-        ..ViewingConditions::default()
-    };
+    super::positive_flag("--scale", args.scale)?;
+    args.view.validate()?;
+    let conditions = args
+        .viewing
+        .conditions(Some(&args.display), None, Some(&args.view));
     conditions.validate()?;
     let (format, ext) = match args.format {
         VideoFormat::Png => (OutputFormat::Png { bits: 8 }, "png"),
@@ -168,9 +160,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         )
     })?;
 
-    let limits = Limits {
-        max_pixels: args.max_pixels,
-    };
+    let limits = args.limits.limits();
     let dt = 1.0 / args.fps;
     let progress = ProgressBar::new(frames.len() as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}").expect("valid template"),
@@ -208,9 +198,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             None => {}
         }
         let conditions = ViewingConditions {
-            view: args
-                .fov
-                .map(|fov| View::perspective(fov, hdr.width, hdr.height)),
+            view: args.view.view(hdr.width, hdr.height),
             ..conditions.clone()
         };
         let report = operator::plan(&hdr, &conditions).with_context(what)?;

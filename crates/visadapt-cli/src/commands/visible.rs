@@ -8,24 +8,15 @@ use crate::graphics::{self, PictureFormat};
 use anyhow::{Context, bail};
 use plotters::style::RGBColor;
 use std::path::Path;
+use visadapt::HdrImage;
 use visadapt::io;
 use visadapt::operator::{Report, ViewingConditions};
 use visadapt::visibility::{self, Difference, Viewer};
-use visadapt::{HdrImage, Limits, View};
 
 pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
-    for (name, v) in [
-        ("--scale", args.scale),
-        ("--peak", args.peak),
-        ("--fov", args.fov),
-    ] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0)
-        {
-            bail!("invalid {name} {v}: must be a positive, finite number");
-        }
-    }
+    args.units.validate()?;
+    args.view.validate()?;
     if let Some(out) = &args.output {
         if PictureFormat::from_path(out)? != PictureFormat::Png {
             bail!(
@@ -35,18 +26,12 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
         }
         refuse_to_overwrite(&[&args.reference, &args.test], out)?;
     }
-    let conditions = ViewingConditions {
-        world_adaptation_cd_m2: args.world_adaptation,
-        world_adaptation_scotopic_cd_m2: args.scotopic_adaptation,
-        hot_pixel_fraction: args.hot_pixel_fraction,
-        acuity: !args.no_acuity,
-        ..ViewingConditions::default()
-    };
+    let conditions = args
+        .viewing
+        .conditions(None, Some(&args.world), Some(&args.view));
     conditions.validate()?;
 
-    let limits = Limits {
-        max_pixels: args.max_pixels,
-    };
+    let limits = args.limits.limits();
     let read = |path: &Path| io::read(path, &limits).with_context(|| path.display().to_string());
     let mut reference = read(&args.reference)?;
     let mut test = read(&args.test)?;
@@ -61,15 +46,13 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
             reference.height
         );
     }
-    let scale = input_scale(&args, &reference, &test)?;
+    let scale = input_scale(&args, &reference, &test, conditions.hot_pixel_fraction)?;
     if scale != 1.0 {
         reference.scale(scale as f32);
         test.scale(scale as f32);
     }
     let conditions = ViewingConditions {
-        view: args
-            .fov
-            .map(|fov| View::perspective(fov, reference.width, reference.height)),
+        view: args.view.view(reference.width, reference.height),
         ..conditions
     };
     let (viewer, report) = Viewer::for_image(&reference, &conditions)?;
@@ -100,15 +83,16 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
 
 /// The factor that turns both images into cd/m²: `--scale`, or `--peak` over the
 /// reference's highest visible luminance, or 1.
-fn input_scale(args: &VisibleArgs, reference: &HdrImage, test: &HdrImage) -> anyhow::Result<f64> {
-    let scale = super::input_scale(
-        &args.reference,
-        reference,
-        args.scale,
-        args.peak,
-        args.hot_pixel_fraction,
-    )?;
-    if args.scale.is_none() && args.peak.is_none() {
+fn input_scale(
+    args: &VisibleArgs,
+    reference: &HdrImage,
+    test: &HdrImage,
+    hot_pixel_fraction: f64,
+) -> anyhow::Result<f64> {
+    let scale = args
+        .units
+        .factor(&args.reference, reference, hot_pixel_fraction)?;
+    if args.units.is_unset() {
         super::warn_if_relative(&args.test, test);
     }
     Ok(scale)
