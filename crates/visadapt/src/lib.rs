@@ -28,7 +28,7 @@
 //!
 //! Units are in the names: `_cd_m2` is photopic cd/m², `_scotopic_cd_m2` is scotopic cd/m²
 //! (CIE 1951 V'(λ), K'm = 1700 lm/W), `_deg` degrees of visual angle, `_px` pixels.
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 #![warn(missing_docs, missing_debug_implementations)]
 
 pub mod acuity;
@@ -48,6 +48,7 @@ pub mod report;
 pub mod scale;
 pub mod scotopic;
 pub mod sequence;
+mod simd;
 pub mod spectral;
 pub mod timecourse;
 pub mod tvi;

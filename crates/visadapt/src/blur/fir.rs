@@ -13,6 +13,8 @@
 //! unique symmetric 3-tap kernel `[a, 1 − 2a, a]` with `2a = σ²`. The taps are all
 //! positive, so the output is a convex combination of input samples.
 
+use crate::simd::madd;
+
 /// Radius of the kernel for `sigma`: at least 4σ, at least 1.
 pub(crate) fn radius(sigma: f64) -> usize {
     ((4.0 * sigma).ceil() as usize).max(1)
@@ -66,9 +68,87 @@ pub(crate) fn kernel(sigma: f64) -> Vec<f32> {
     taps.iter().map(|&v| v as f32).collect()
 }
 
-/// Convolve one row with `k` (replicate boundary), using `pad` as scratch.
-pub(crate) fn row(k: &[f32], row: &mut [f32], pad: &mut Vec<f32>) {
-    let r = k.len() / 2;
+/// The taps from the centre outwards, `k[R..=2R]` of [`kernel`] (the kernel is
+/// symmetric, so each outer tap weighs the sum of two samples).
+pub(crate) fn half_kernel(sigma: f64) -> Vec<f32> {
+    let k = kernel(sigma);
+    k[k.len() / 2..].to_vec()
+}
+
+/// Samples computed together: four AVX2 vectors (eight SSE2 ones), independent
+/// accumulators so that the multiply-add latency is hidden; [`NARROW`] for the rest.
+const WIDE: usize = 32;
+/// The narrower block for what is left after the [`WIDE`] ones: one AVX2 vector.
+const NARROW: usize = 8;
+
+/// One output sample: `h[0]·x(0) + Σ_j h[j]·(x(−j) + x(j))`, the same operations in the
+/// same order for rows and columns and for every block width, so that all round
+/// identically.
+#[inline(always)]
+fn tap_sum<const FMA: bool>(half: &[f32], x: impl Fn(isize) -> f32) -> f32 {
+    let mut acc = half[0] * x(0);
+    for (j, &h) in half.iter().enumerate().skip(1) {
+        let j = j as isize;
+        acc = madd::<FMA>(h, x(-j) + x(j), acc);
+    }
+    acc
+}
+
+/// [`tap_sum`] for `N` adjacent outputs at once; `x(d)` gives the `N` inputs at offset
+/// `d` from them.
+#[inline(always)]
+fn tap_sum_lanes<'a, const FMA: bool, const N: usize>(
+    half: &[f32],
+    x: impl Fn(isize) -> &'a [f32; N],
+) -> [f32; N] {
+    let c = x(0);
+    let mut acc: [f32; N] = std::array::from_fn(|l| half[0] * c[l]);
+    for (j, &h) in half.iter().enumerate().skip(1) {
+        let j = j as isize;
+        let (lo, hi) = (x(-j), x(j));
+        for l in 0..N {
+            acc[l] = madd::<FMA>(h, lo[l] + hi[l], acc[l]);
+        }
+    }
+    acc
+}
+
+#[inline(always)]
+fn lanes_at<const N: usize>(v: &[f32], at: usize) -> &[f32; N] {
+    v[at..at + N].try_into().expect("N samples")
+}
+
+/// Compute `out[i]` for all `i` from `x(i, d)`, the input at offset `d` from output `i`,
+/// in blocks of [`WIDE`], then [`NARROW`], then one.
+#[inline(always)]
+fn convolve<const FMA: bool>(
+    half: &[f32],
+    out: &mut [f32],
+    block: impl Fn(usize, isize) -> usize,
+    src: &[f32],
+) {
+    let n = out.len();
+    let mut i = 0;
+    while i + WIDE <= n {
+        let acc = tap_sum_lanes::<FMA, WIDE>(half, |d| lanes_at(src, block(i, d)));
+        out[i..i + WIDE].copy_from_slice(&acc);
+        i += WIDE;
+    }
+    while i + NARROW <= n {
+        let acc = tap_sum_lanes::<FMA, NARROW>(half, |d| lanes_at(src, block(i, d)));
+        out[i..i + NARROW].copy_from_slice(&acc);
+        i += NARROW;
+    }
+    for (i, o) in out.iter_mut().enumerate().skip(i) {
+        *o = tap_sum::<FMA>(half, |d| src[block(i, d)]);
+    }
+}
+
+/// Convolve one row with the kernel whose centre-outwards taps are `half` (replicate
+/// boundary), using `pad` as scratch.
+#[inline(always)]
+pub(crate) fn row<const FMA: bool>(half: &[f32], row: &mut [f32], pad: &mut Vec<f32>) {
+    let r = half.len() - 1;
     let n = row.len();
     let (Some(&first), Some(&last)) = (row.first(), row.last()) else {
         return;
@@ -77,32 +157,46 @@ pub(crate) fn row(k: &[f32], row: &mut [f32], pad: &mut Vec<f32>) {
     pad.resize(r, first);
     pad.extend_from_slice(row);
     pad.resize(n + 2 * r, last);
-    row.fill(0.0);
-    for (j, &kj) in k.iter().enumerate() {
-        for (o, &x) in row.iter_mut().zip(&pad[j..j + n]) {
-            *o += kj * x;
-        }
+    convolve::<FMA>(half, row, |i, d| (i + r).wrapping_add_signed(d), pad);
+}
+
+/// Copy a strip of row segments (all of the same width) into `scratch` as
+/// `segs.len() + 2r` contiguous rows, the first and last replicated `r` times.
+pub(crate) fn fill_strip(segs: &[&mut [f32]], r: usize, scratch: &mut Vec<f32>) {
+    scratch.clear();
+    let (Some(first), Some(last)) = (segs.first(), segs.last()) else {
+        return;
+    };
+    for _ in 0..r {
+        scratch.extend_from_slice(first);
+    }
+    for s in segs {
+        scratch.extend_from_slice(s);
+    }
+    for _ in 0..r {
+        scratch.extend_from_slice(last);
     }
 }
 
-/// Compute output row `y` of the vertical convolution of `src` (`width`-long rows,
-/// `height` of them) into `out`.
-pub(crate) fn column_row(
-    k: &[f32],
-    src: &[f32],
-    width: usize,
-    height: usize,
-    y: usize,
-    out: &mut [f32],
+/// Convolve a strip of columns vertically: `scratch` is the strip as [`fill_strip`]
+/// left it, the output rows are written to `segs`.
+#[inline(always)]
+pub(crate) fn column_strip<const FMA: bool>(
+    half: &[f32],
+    scratch: &[f32],
+    segs: &mut [&mut [f32]],
 ) {
-    let r = k.len() / 2;
-    out.fill(0.0);
-    for (j, &kj) in k.iter().enumerate() {
-        let sy = (y + j).saturating_sub(r).min(height - 1);
-        let s = &src[sy * width..(sy + 1) * width];
-        for (o, &x) in out.iter_mut().zip(s) {
-            *o += kj * x;
-        }
+    let r = half.len() - 1;
+    let Some(sw) = segs.first().map(|s| s.len()) else {
+        return;
+    };
+    for (y, seg) in segs.iter_mut().enumerate() {
+        convolve::<FMA>(
+            half,
+            seg,
+            |x, d| (y + r).wrapping_add_signed(d) * sw + x,
+            scratch,
+        );
     }
 }
 
