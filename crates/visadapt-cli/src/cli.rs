@@ -136,6 +136,12 @@ pub struct LimitsArgs {
     /// Largest accepted input in pixels (width x height); guards against corrupt headers.
     #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
     pub max_pixels: u64,
+
+    /// Memory budget for what the input controls (the file's bytes, decoded planes,
+    /// decompression buffers), in bytes or with a K, M, G or T suffix (powers of 1024).
+    /// Checked before each allocation; the default is half of a 24 GiB machine.
+    #[arg(long, value_name = "SIZE", default_value = "12G", value_parser = parse_memory)]
+    pub max_memory: u64,
 }
 
 impl LimitsArgs {
@@ -143,6 +149,7 @@ impl LimitsArgs {
     pub fn limits(&self) -> visadapt::Limits {
         visadapt::Limits {
             max_pixels: self.max_pixels,
+            max_memory_bytes: self.max_memory,
         }
     }
 }
@@ -249,6 +256,31 @@ pub struct ObserverArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// A memory size: bytes, or a number with a K, M, G or T suffix (powers of 1024).
+fn parse_memory(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let (digits, shift) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let shift = match c.to_ascii_uppercase() {
+                'K' => 10,
+                'M' => 20,
+                'G' => 30,
+                'T' => 40,
+                _ => return Err(format!("{s}: unknown unit (use K, M, G or T)")),
+            };
+            (&t[..i], shift)
+        }
+        _ => (t, 0),
+    };
+    let n: u64 = digits
+        .parse()
+        .map_err(|_| format!("{s} is not a size such as 8G or 512M"))?;
+    match n.checked_mul(1 << shift) {
+        Some(0) | None => Err(format!("{s}: must be between 1 byte and 16 EiB")),
+        Some(v) => Ok(v),
+    }
 }
 
 fn parse_bits(s: &str) -> Result<u8, String> {

@@ -43,22 +43,67 @@ pub enum Error {
 
 /// Details of an [`Error::Limits`].
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct LimitsExceeded {
-    /// Width declared by the file, in pixels.
-    pub width: u64,
-    /// Height declared by the file, in pixels.
-    pub height: u64,
-    /// The pixel limit in force.
-    pub max_pixels: u64,
+#[non_exhaustive]
+pub enum LimitsExceeded {
+    /// The image declares more pixels than [`Limits::max_pixels`](crate::Limits::max_pixels).
+    Pixels {
+        /// Width declared by the file, in pixels.
+        width: u64,
+        /// Height declared by the file, in pixels.
+        height: u64,
+        /// The pixel limit in force.
+        max_pixels: u64,
+    },
+    /// Something would need more memory than
+    /// [`Limits::max_memory_bytes`](crate::Limits::max_memory_bytes).
+    Memory {
+        /// What needs it, e.g. `"the decoded planes"`.
+        what: String,
+        /// Bytes it needs.
+        bytes: u64,
+        /// The budget in force.
+        max_memory_bytes: u64,
+    },
+}
+
+/// `bytes` in the largest binary unit that keeps a number of at least 1 (e.g. `12.0 GiB`).
+pub(crate) fn human_bytes(bytes: u64) -> String {
+    const UNITS: [&str; 5] = ["bytes", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = bytes as f64;
+    let mut unit = 0;
+    while v >= 1024.0 && unit + 1 < UNITS.len() {
+        v /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} bytes")
+    } else {
+        format!("{v:.1} {}", UNITS[unit])
+    }
 }
 
 impl fmt::Display for LimitsExceeded {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "image of {}x{} pixels exceeds the limit of {} pixels (raise it with --max-pixels)",
-            self.width, self.height, self.max_pixels
-        )
+        match self {
+            LimitsExceeded::Pixels {
+                width,
+                height,
+                max_pixels,
+            } => write!(
+                f,
+                "image of {width}x{height} pixels exceeds the limit of {max_pixels} pixels (raise it with --max-pixels)"
+            ),
+            LimitsExceeded::Memory {
+                what,
+                bytes,
+                max_memory_bytes,
+            } => write!(
+                f,
+                "{what} would need {}, more than the memory budget of {} (raise it with --max-memory)",
+                human_bytes(*bytes),
+                human_bytes(*max_memory_bytes)
+            ),
+        }
     }
 }
 

@@ -1,29 +1,44 @@
-//! Size limits checked against a file's declared dimensions before any pixel memory is
-//! allocated, so that a corrupt or hostile header cannot make us allocate gigabytes.
+//! Size and memory limits, checked against what a file declares before any memory is
+//! allocated for it, so that a corrupt or hostile header cannot make us allocate gigabytes
+//! (or abort: a failed allocation ends the process, it cannot be caught).
 
 use crate::error::{Error, LimitsExceeded, Result};
 
-/// Upper bounds on images the readers accept.
+/// Upper bounds on images the readers accept and on the memory they may use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {
     /// Largest accepted `width × height`, in pixels. The default, 2^28 (268 M pixels,
-    /// e.g. 16384 × 16384), needs about 5 GiB for the five f32 planes of an [`HdrImage`](crate::HdrImage).
+    /// e.g. 16384 × 16384), needs about 5 GiB for the five f32 planes of an
+    /// [`HdrImage`](crate::HdrImage).
     pub max_pixels: u64,
+    /// Memory budget in bytes for everything whose size the input controls: the file's
+    /// bytes held in memory, the decoded planes, each decompressed block and the blocks
+    /// in flight together. Checked before each such allocation. The default,
+    /// [`Limits::DEFAULT_MAX_MEMORY_BYTES`], is half the 24 GiB of the machines the
+    /// project is built on, and holds an image at the default pixel limit together with
+    /// the working set of [`operator::map`](crate::operator::map) (about 36 bytes per
+    /// pixel).
+    pub max_memory_bytes: u64,
 }
 
 impl Default for Limits {
     fn default() -> Self {
         Limits {
             max_pixels: 1 << 28,
+            max_memory_bytes: Self::DEFAULT_MAX_MEMORY_BYTES,
         }
     }
 }
 
 impl Limits {
+    /// The default memory budget, 12 GiB (our choice; see [`Limits::max_memory_bytes`]).
+    pub const DEFAULT_MAX_MEMORY_BYTES: u64 = 12 << 30;
+
     /// No practical limit (still guards against `usize` overflow).
     pub fn none() -> Self {
         Limits {
             max_pixels: u64::MAX,
+            max_memory_bytes: u64::MAX,
         }
     }
 
@@ -37,7 +52,7 @@ impl Limits {
             ));
         }
         let exceeded = || {
-            Error::Limits(LimitsExceeded {
+            Error::Limits(LimitsExceeded::Pixels {
                 width,
                 height,
                 max_pixels: self.max_pixels,
@@ -51,5 +66,18 @@ impl Limits {
         let n_usize = usize::try_from(n).map_err(|_| exceeded())?;
         n_usize.checked_mul(5 * 4).ok_or_else(exceeded)?;
         Ok(n_usize)
+    }
+
+    /// Check that `bytes` (of `what`, for the message) fit in the memory budget. `None`
+    /// stands for a size that overflowed while it was computed.
+    pub fn check_memory(&self, what: &str, bytes: Option<u64>) -> Result<()> {
+        match bytes {
+            Some(b) if b <= self.max_memory_bytes => Ok(()),
+            _ => Err(Error::Limits(LimitsExceeded::Memory {
+                what: what.to_string(),
+                bytes: bytes.unwrap_or(u64::MAX),
+                max_memory_bytes: self.max_memory_bytes,
+            })),
+        }
     }
 }

@@ -18,7 +18,8 @@
 //! display image are reused, and each frame is handed to the caller as soon as it is done.
 
 use crate::adaptation::highest_visible;
-use crate::io::display::{commit_temp_file, png_error, temp_file_beside, to_srgb8};
+use crate::io::display::{png_error, to_srgb8};
+use crate::io::output::PendingFile;
 use crate::operator::{self, Mapping, PixelStats, Report, ViewingConditions};
 use crate::timecourse::{Adaptation, check_times};
 use crate::{DisplayImage, Error, HdrImage, Result};
@@ -228,7 +229,7 @@ pub fn render(
 /// `path` and renamed, as every output of the library).
 pub struct ApngWriter {
     path: PathBuf,
-    tmp: tempfile::NamedTempFile,
+    tmp: PendingFile,
     writer: png::Writer<BufWriter<File>>,
     width: usize,
     height: usize,
@@ -270,8 +271,8 @@ impl ApngWriter {
                 "needs at least one non-empty frame and a positive delay",
             ));
         }
-        let tmp = temp_file_beside(path)?;
-        let file = tmp.as_file().try_clone()?;
+        let tmp = PendingFile::create(path)?;
+        let file = tmp.file().try_clone()?;
         let mut enc = png::Encoder::new(BufWriter::new(file), w, h);
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
@@ -321,7 +322,6 @@ impl ApngWriter {
     /// place.
     pub fn finish(self) -> Result<()> {
         let ApngWriter {
-            path,
             tmp,
             writer,
             frames,
@@ -337,7 +337,7 @@ impl ApngWriter {
             ));
         }
         writer.finish().map_err(png_error)?;
-        commit_temp_file(tmp, &path)?;
+        tmp.commit()?;
         Ok(())
     }
 }

@@ -496,12 +496,24 @@ fn limits_are_checked_and_truncation_is_an_error() {
         LayerAttributes::default(),
         None,
     );
-    let small = Limits { max_pixels: 4095 };
+    let small = Limits {
+        max_pixels: 4095,
+        ..Limits::default()
+    };
     assert!(matches!(
         vexr::decode(&bytes, &small),
         Err(Error::Limits(_))
     ));
-    assert!(vexr::decode(&bytes, &Limits { max_pixels: 4096 }).is_ok());
+    assert!(
+        vexr::decode(
+            &bytes,
+            &Limits {
+                max_pixels: 4096,
+                ..Limits::default()
+            }
+        )
+        .is_ok()
+    );
     for cut in [10, 100, bytes.len() / 2, bytes.len() - 1] {
         let e = vexr::decode(&bytes[..cut], &Limits::default()).unwrap_err();
         assert!(matches!(e, Error::Decode { .. }), "cut at {cut}: {e}");

@@ -122,7 +122,10 @@ fn absurd_dimensions_hit_the_limits_before_allocating() {
     }
     let e = pfm::decode(&pfm_bytes("Pf\n0 5\n-1\n", &[], true), &Limits::default()).unwrap_err();
     assert!(matches!(e, Error::Decode { .. }), "{e}");
-    let small = Limits { max_pixels: 3 };
+    let small = Limits {
+        max_pixels: 3,
+        ..Limits::default()
+    };
     let e = pfm::decode(&pfm_bytes("Pf\n2 2\n-1\n", &[1.0; 4], true), &small).unwrap_err();
     assert!(matches!(e, Error::Limits(_)), "{e}");
 }

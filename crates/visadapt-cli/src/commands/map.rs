@@ -2,15 +2,14 @@
 
 use crate::cli::MapArgs;
 use crate::report;
-use anyhow::{Context, bail};
+use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::Path;
 use visadapt::io::{self, OutputFormat};
 use visadapt::operator::{self, ViewingConditions};
 
 pub fn run(args: MapArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
-    refuse_to_overwrite_input(&args.input, &args.output)?;
+    io::output::refuse_same_file(&args.output, &[&args.input])?;
     let format = output_format(&args)?;
     args.units.validate()?;
     args.view.validate()?;
@@ -82,14 +81,4 @@ fn output_format(args: &MapArgs) -> anyhow::Result<OutputFormat> {
         },
         f => f,
     })
-}
-
-/// The output must never replace the input.
-fn refuse_to_overwrite_input(input: &Path, output: &Path) -> anyhow::Result<()> {
-    if let (Ok(a), Ok(b)) = (input.canonicalize(), output.canonicalize())
-        && a == b
-    {
-        bail!("{}: output would overwrite the input", output.display());
-    }
-    Ok(())
 }

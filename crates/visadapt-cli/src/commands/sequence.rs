@@ -24,6 +24,15 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
         bail!("invalid --apng-delay-ms 0: must be at least 1");
     }
     let sequence = Sequence::new(from, to, args.times.clone())?;
+    // No output may be the input, under any name: the animation, and every frame.
+    let count = sequence.frame_count();
+    if let Some(apng) = &args.apng {
+        io::output::refuse_same_file(apng, &[&args.input])?;
+    }
+    for index in 0..count {
+        let frame = args.output.join(frame_name(index, count));
+        io::output::refuse_same_file(&frame, &[&args.input])?;
+    }
     let conditions = args
         .viewing
         .conditions(Some(&args.display), None, Some(&args.view));
@@ -42,7 +51,6 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
         )
     })?;
 
-    let count = sequence.frame_count();
     let mut apng = match &args.apng {
         Some(path) => Some(
             ApngWriter::create(

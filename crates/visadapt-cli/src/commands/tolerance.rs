@@ -22,14 +22,7 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
             args.output.display()
         );
     }
-    if let (Ok(a), Ok(b)) = (args.input.canonicalize(), args.output.canonicalize())
-        && a == b
-    {
-        bail!(
-            "{}: output would overwrite the input",
-            args.output.display()
-        );
-    }
+    io::output::refuse_same_file(&args.output, &[&args.input])?;
     args.units.validate()?;
     let conditions = ViewingConditions {
         // The tolerance holds for errors of any extent; acuity does not enter it.

@@ -17,12 +17,15 @@
 use crate::cli::{VideoArgs, VideoFormat};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::io::Read;
 use std::path::{Path, PathBuf};
-use visadapt::io::{self, InputFormat, OutputFormat, radiance};
+use visadapt::io::{self, OutputFormat};
 use visadapt::operator::{self, ViewingConditions};
 use visadapt::timecourse::Adaptation;
-use visadapt::{DisplayImage, HdrImage, Limits};
+use visadapt::{DisplayImage, HdrImage};
+
+/// Longest file name on the usual file systems (POSIX `NAME_MAX` on Linux, ext4, XFS,
+/// Btrfs), in bytes: the largest padding a frame pattern can sensibly ask for.
+const MAX_NAME_LEN: usize = 255;
 
 /// A parsed frame pattern: `dir/prefix%0Ndsuffix`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -57,13 +60,18 @@ impl Pattern {
         if !rest[digits.len()..].starts_with('d') {
             return Err(bad());
         }
-        let width = if digits.is_empty() {
+        let width: usize = if digits.is_empty() {
             0
         } else if digits.starts_with('0') && digits.len() > 1 {
             digits[1..].parse().map_err(|_| bad())?
         } else {
             return Err(bad()); // %Nd pads with spaces: not a file-name pattern
         };
+        if width > MAX_NAME_LEN {
+            bail!(
+                "{pattern}: %0{width}d pads to more digits than a file name can hold ({MAX_NAME_LEN} bytes)"
+            );
+        }
         let suffix = &rest[digits.len() + 1..];
         if suffix.contains('%') {
             return Err(bad());
@@ -145,13 +153,10 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         let stem = input.file_stem().unwrap_or_default();
         args.output.join(stem).with_extension(ext)
     };
-    // Never overwrite an input frame (same directory and extension).
+    // Never overwrite an input frame (under any name: every output against every input).
+    let inputs: Vec<&Path> = frames.iter().map(|(_, p)| p.as_path()).collect();
     for (_, input) in &frames {
-        if let (Ok(a), Ok(b)) = (input.canonicalize(), out_path(input).canonicalize())
-            && a == b
-        {
-            bail!("{}: output would overwrite the input frame", b.display());
-        }
+        io::output::refuse_same_file(&out_path(input), &inputs)?;
     }
     std::fs::create_dir_all(&args.output).with_context(|| {
         format!(
@@ -173,7 +178,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     let mut warned_units = false;
     for (k, (n, input)) in frames.iter().enumerate() {
         let what = || format!("frame {n} ({})", input.display());
-        read_frame(input, &limits, &mut bytes, &mut hdr).with_context(what)?;
+        io::read_into(input, &limits, &mut bytes, &mut hdr).with_context(what)?;
         match size {
             None => size = Some((hdr.width, hdr.height)),
             Some((w, h)) if (w, h) != (hdr.width, hdr.height) => {
@@ -245,22 +250,6 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Read one frame into `hdr`, reusing `bytes` and (for Radiance files) `hdr`'s planes.
-fn read_frame(
-    path: &Path,
-    limits: &Limits,
-    bytes: &mut Vec<u8>,
-    hdr: &mut HdrImage,
-) -> anyhow::Result<()> {
-    bytes.clear();
-    std::fs::File::open(path)?.read_to_end(bytes)?;
-    match io::detect(bytes) {
-        Some(InputFormat::Radiance) => radiance::decode_into(bytes, limits, hdr)?,
-        _ => *hdr = io::decode(bytes, limits)?,
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -279,7 +268,16 @@ mod tests {
         assert_eq!(p.dir, PathBuf::from("."));
         assert_eq!(p.number("x10.hdr"), Some(10));
         assert_eq!(p.number("x010.hdr"), None);
-        for bad in ["f.exr", "f_%04d_%d.exr", "f_%4d.exr", "f_%s.exr", ""] {
+        for bad in [
+            "f.exr",
+            "f_%04d_%d.exr",
+            "f_%4d.exr",
+            "f_%s.exr",
+            "",
+            "f_%0256d.hdr",
+            "f_%065536d.hdr",
+            "f_%099999999999999999999999d.hdr",
+        ] {
             assert!(Pattern::parse(bad).is_err(), "{bad}");
         }
     }

@@ -24,7 +24,7 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
                 out.display()
             );
         }
-        refuse_to_overwrite(&[&args.reference, &args.test], out)?;
+        io::output::refuse_same_file(out, &[&args.reference, &args.test])?;
     }
     let conditions = args
         .viewing
@@ -96,18 +96,6 @@ fn input_scale(
         super::warn_if_relative(&args.test, test);
     }
     Ok(scale)
-}
-
-/// The output must never replace an input.
-fn refuse_to_overwrite(inputs: &[&Path], output: &Path) -> anyhow::Result<()> {
-    if let Ok(out) = output.canonicalize() {
-        for input in inputs {
-            if input.canonicalize().is_ok_and(|i| i == out) {
-                bail!("{}: output would overwrite an input", output.display());
-            }
-        }
-    }
-    Ok(())
 }
 
 fn text_report(d: &Difference, r: &Report) -> String {

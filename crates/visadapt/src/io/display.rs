@@ -2,6 +2,7 @@
 //! (IEC 61966-2-1 transfer curve, tagged with the PNG `sRGB` chunk), and the file-writing
 //! discipline every output of the library follows.
 
+use super::output::PendingFile;
 use crate::colour::SrgbLut;
 use crate::{DisplayImage, Error, Result};
 use std::io::Write;
@@ -102,47 +103,19 @@ pub(crate) fn png_error(e: png::EncodingError) -> Error {
 }
 
 /// Write a file all at once or not at all: `write` fills a temporary file in the
-/// destination's directory, which is then renamed over `path`. On any error the temporary
-/// file is removed and `path` is untouched (a previous file there survives).
+/// destination's directory, which is then moved over `path` (see [`super::output`]: it is
+/// unnamed until complete where the platform allows, never replaces an input of the
+/// process, and takes the permissions described there). On any error the temporary file
+/// is removed and `path` is untouched (a previous file there survives).
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> Result<()>,
 ) -> Result<()> {
-    let tmp = temp_file_beside(path)?;
+    let pending = PendingFile::create(path)?;
     {
-        let mut w = std::io::BufWriter::new(tmp.as_file());
+        let mut w = std::io::BufWriter::new(pending.file());
         write(&mut w)?;
         w.flush()?;
     }
-    commit_temp_file(tmp, path)
-}
-
-/// A private temporary file in `path`'s directory, to be renamed over `path` by
-/// [`commit_temp_file`] (dropping it instead removes it).
-pub(crate) fn temp_file_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    Ok(tempfile::Builder::new()
-        .prefix(".visadapt-")
-        .suffix(".tmp")
-        .tempfile_in(dir)?)
-}
-
-/// Give a finished temporary file the permissions of the file it replaces (or the usual
-/// 0644 of a new file, not the temporary file's private 0600), flush it to disk and
-/// rename it over `path`.
-pub(crate) fn commit_temp_file(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let perms = std::fs::metadata(path)
-            .map(|m| m.permissions())
-            .unwrap_or_else(|_| std::fs::Permissions::from_mode(0o644));
-        tmp.as_file().set_permissions(perms)?;
-    }
-    tmp.as_file().sync_all()?;
-    tmp.persist(path).map_err(|e| Error::Io(e.error))?;
-    Ok(())
+    pending.commit()
 }

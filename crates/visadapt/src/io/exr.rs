@@ -94,6 +94,39 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
     guarded(|| decode_unguarded(bytes, limits))
 }
 
+/// Most bytes of a chunk header: part number (4), tile coordinates (16), data size (4)
+/// and the two deep-data sizes (16) (OpenEXR file layout, "Chunk layout").
+const MAX_CHUNK_HEADER: u64 = 40;
+
+/// An upper bound on the bytes of a file whose headers are at the start of `head`: the
+/// headers, every part's offset table, and for every chunk a header and at most one
+/// uncompressed block (OpenEXR stores a block uncompressed when compression does not make
+/// it smaller); `u64::MAX` when a part is deep (its chunks have no such bound: the memory
+/// budget is the bound). `None` when the headers cannot be read from `head`.
+pub(crate) fn file_len_bound(head: &[u8]) -> Option<u64> {
+    let mut cursor = Cursor::new(head);
+    let meta =
+        guarded(|| MetaData::read_from_buffered(&mut cursor, false).map_err(exr_error)).ok()?;
+    let mut total = cursor.position();
+    for h in &meta.headers {
+        if h.deep {
+            return Some(u64::MAX);
+        }
+        let (w, ht) = (h.layer_size.0 as u64, h.layer_size.1 as u64);
+        let (bw, bh) = match h.blocks {
+            BlockDescription::ScanLines => (w, h.compression.scan_lines_per_block() as u64),
+            BlockDescription::Tiles(t) => (t.tile_size.0 as u64, t.tile_size.1 as u64),
+        };
+        let block = bw
+            .min(w.max(1))
+            .checked_mul(bh.min(ht.max(1)))?
+            .checked_mul(h.channels.bytes_per_pixel as u64)?;
+        let per_chunk = block.checked_add(MAX_CHUNK_HEADER + 8)?;
+        total = total.checked_add((h.chunk_count as u64).checked_mul(per_chunk)?)?;
+    }
+    Some(total)
+}
+
 /// Run `f`, turning a panic (in the `exr` crate, on damaged data) into a decode error.
 fn guarded<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
     std::panic::catch_unwind(AssertUnwindSafe(f))

@@ -8,6 +8,7 @@ use std::path::Path;
 
 pub mod display;
 pub mod exr;
+pub mod output;
 pub mod pfm;
 pub mod radiance;
 
@@ -35,10 +36,115 @@ pub fn detect(head: &[u8]) -> Option<InputFormat> {
     }
 }
 
-/// Read an HDR image from a file, whatever its format.
+/// How many bytes are read first, to detect the format and parse the header from. Headers
+/// longer than this are refused (real ones are a few hundred bytes to a few KiB; an EXR
+/// with hundreds of channels stays far below it).
+pub const HEAD_LEN: usize = 1 << 20;
+
+/// Read an HDR image from a file, whatever its format (see [`read_bytes`] for what is
+/// read).
 pub fn read(path: &Path, limits: &Limits) -> Result<HdrImage> {
-    let bytes = std::fs::read(path)?;
+    let mut bytes = Vec::new();
+    read_bytes(path, limits, &mut bytes)?;
     decode(&bytes, limits)
+}
+
+/// [`read`] into existing buffers, reusing their memory (for a sequence of frames):
+/// `bytes` receives the file's bytes, `image` the decoded image (Radiance files are
+/// decoded into its planes, see [`radiance::decode_into`]).
+pub fn read_into(
+    path: &Path,
+    limits: &Limits,
+    bytes: &mut Vec<u8>,
+    image: &mut HdrImage,
+) -> Result<()> {
+    match read_bytes(path, limits, bytes)? {
+        InputFormat::Radiance => radiance::decode_into(bytes, limits, image),
+        _ => {
+            *image = decode(bytes, limits)?;
+            Ok(())
+        }
+    }
+}
+
+/// Read the bytes of the HDR image file at `path` into `bytes`, no more than its format
+/// can need: the first [`HEAD_LEN`] bytes are read and the format is detected from them
+/// (an unrecognised file is refused there, so `/dev/zero` costs one read), then at most
+/// as many bytes as the header says the pixel data can take (see each format's reader),
+/// and never more than [`Limits::max_memory_bytes`]. Bytes after that are not read.
+/// The file is also registered as an input that no output of this process may replace
+/// ([`output::protect_input`]).
+pub fn read_bytes(path: &Path, limits: &Limits, bytes: &mut Vec<u8>) -> Result<InputFormat> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    output::protect_input(path, &file)?;
+    bytes.clear();
+    let head_len = (HEAD_LEN as u64).min(limits.max_memory_bytes);
+    (&mut file).take(head_len).read_to_end(bytes)?;
+    let format = detect(bytes).ok_or_else(unrecognised)?;
+    let complete = (bytes.len() as u64) < head_len;
+    if complete {
+        return Ok(format);
+    }
+    let bound = match format {
+        InputFormat::Radiance => radiance::file_len_bound(bytes),
+        InputFormat::OpenExr => exr::file_len_bound(bytes),
+        InputFormat::Pfm => pfm::file_len(bytes),
+    };
+    let bound = bound.ok_or_else(|| {
+        Error::decode(
+            format_name(format),
+            format!("the header does not end within the first {HEAD_LEN} bytes"),
+        )
+    })?;
+    // Read at most one byte more than the budget, to tell a file that exceeds it.
+    let want = bound.min(limits.max_memory_bytes.saturating_add(1));
+    if want < bytes.len() as u64 {
+        bytes.truncate(want as usize);
+    } else if want > bytes.len() as u64 {
+        let on_disk = file
+            .metadata()
+            .ok()
+            .filter(|m| m.is_file())
+            .map(|m| m.len());
+        let reserve = want
+            .min(on_disk.unwrap_or(want))
+            .saturating_sub(bytes.len() as u64);
+        limits.check_memory("the file's bytes", Some(bytes.len() as u64 + reserve))?;
+        bytes
+            .try_reserve_exact(usize::try_from(reserve).unwrap_or(usize::MAX))
+            .map_err(|_| out_of_memory("the file's bytes", reserve))?;
+        (&mut file)
+            .take(want - bytes.len() as u64)
+            .read_to_end(bytes)?;
+    }
+    limits.check_memory("the file's bytes", Some(bytes.len() as u64))?;
+    Ok(format)
+}
+
+/// The format's name, as in its reader's errors.
+fn format_name(f: InputFormat) -> &'static str {
+    match f {
+        InputFormat::Radiance => "Radiance",
+        InputFormat::OpenExr => "OpenEXR",
+        InputFormat::Pfm => "PFM",
+    }
+}
+
+/// The error for a file of no format we read.
+fn unrecognised() -> Error {
+    Error::Unsupported("not a Radiance, OpenEXR or PFM file (unrecognised first bytes)".into())
+}
+
+/// The error for an allocation the system refused although it was within the budget.
+pub(crate) fn out_of_memory(what: &str, bytes: u64) -> Error {
+    Error::Io(std::io::Error::new(
+        std::io::ErrorKind::OutOfMemory,
+        format!(
+            "cannot allocate {} for {what}",
+            crate::error::human_bytes(bytes)
+        ),
+    ))
 }
 
 /// Decode an HDR image held in memory, whatever its format.
@@ -47,9 +153,7 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
         Some(InputFormat::Radiance) => radiance::decode(bytes, limits),
         Some(InputFormat::OpenExr) => exr::decode(bytes, limits),
         Some(InputFormat::Pfm) => pfm::decode(bytes, limits),
-        None => Err(crate::Error::Unsupported(
-            "not a Radiance, OpenEXR or PFM file (unrecognised first bytes)".into(),
-        )),
+        None => Err(unrecognised()),
     }
 }
 

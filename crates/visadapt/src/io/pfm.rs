@@ -68,8 +68,8 @@ fn saturate(v: f64) -> f32 {
     }
 }
 
-/// Decode a PFM file held in memory (see the [module documentation](self)).
-pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
+/// The header: channels, width, height, scale, and the offset of the first data byte.
+fn parse_header(bytes: &[u8]) -> Result<(usize, u64, u64, f64, usize)> {
     let channels = match bytes.get(..2) {
         Some(b"PF") => 3usize,
         Some(b"Pf") => 1,
@@ -91,8 +91,22 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
     if !bytes.get(pos).is_some_and(u8::is_ascii_whitespace) {
         return Err(Error::decode(FORMAT, "header is truncated"));
     }
-    pos += 1;
+    Ok((channels, width, height, scale, pos + 1))
+}
 
+/// The length of the whole file its header at the start of `head` declares, `None` when
+/// the header cannot be parsed (the decoder then reports why).
+pub(crate) fn file_len(head: &[u8]) -> Option<u64> {
+    let (channels, width, height, _, pos) = parse_header(head).ok()?;
+    width
+        .checked_mul(height)?
+        .checked_mul(channels as u64 * 4)?
+        .checked_add(pos as u64)
+}
+
+/// Decode a PFM file held in memory (see the [module documentation](self)).
+pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
+    let (channels, width, height, scale, pos) = parse_header(bytes)?;
     let n = limits.check(FORMAT, width, height)?;
     let (w, h) = (width as usize, height as usize);
     let need = n

@@ -203,6 +203,29 @@ pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Resul
     Ok(())
 }
 
+/// Most bytes one pixel can take in a scanline: seven 4-byte records (the pixel and up to
+/// six old-style repeat records, whose shift reaches 40 bits; a seventh is refused by
+/// [`read_records`]). New-style run-length data takes at most 8 (a one-byte literal per
+/// component).
+const MAX_BYTES_PER_PIXEL: u64 = 28;
+
+/// Most bytes a scanline can take besides its pixels (the `2 2 hi lo` marker).
+const MAX_SCANLINE_OVERHEAD: u64 = 4;
+
+/// An upper bound on the bytes of a file whose header and resolution line are at the
+/// start of `head`: the data of a valid picture cannot be longer. `None` when they cannot
+/// be parsed from `head` (the decoder then says why).
+pub(crate) fn file_len_bound(head: &[u8]) -> Option<u64> {
+    let (_, after_header) = parse_header(head).ok()?;
+    let (res, data_start) = parse_resolution(head, after_header).ok()?;
+    let scanlines = if res.y_major { res.height } else { res.width };
+    res.width
+        .checked_mul(res.height)?
+        .checked_mul(MAX_BYTES_PER_PIXEL)?
+        .checked_add(scanlines.checked_mul(MAX_SCANLINE_OVERHEAD)?)?
+        .checked_add(data_start as u64)
+}
+
 /// The error for data that ends too early.
 fn truncated() -> Error {
     Error::decode(FORMAT, "file is truncated")
@@ -562,11 +585,12 @@ fn read_records(data: &[u8], pos: &mut usize, scan: &mut [u8], len: usize) -> Re
                     "repeat record with no pixel to repeat",
                 ));
             }
-            // A count shifted by 48 bits or more exceeds any scanline; zero counts are
-            // legitimate (they only carry the shift).
+            // A count shifted by 48 bits or more exceeds any scanline, and so does a
+            // seventh repeat record in a row (this bounds the bytes of a scanline); zero
+            // counts are legitimate (they only carry the shift).
             let count = match (count, shift) {
-                (0, _) => 0,
                 (_, 48..) => return Err(overrun()),
+                (0, _) => 0,
                 (c, s) => u64::from(c) << s,
             };
             let end = (i as u64).saturating_add(count);
@@ -1375,7 +1399,13 @@ mod tests {
         ));
         let bytes = file(&["#?RADIANCE"], "-Y 10 +X 10", &[]);
         assert!(matches!(
-            decode(&bytes, &Limits { max_pixels: 99 }),
+            decode(
+                &bytes,
+                &Limits {
+                    max_pixels: 99,
+                    ..Limits::default()
+                }
+            ),
             Err(Error::Limits(_))
         ));
         // Within the limits but without the data: truncated, before allocating 5 GiB.
