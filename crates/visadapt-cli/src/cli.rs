@@ -55,6 +55,11 @@ pub enum Command {
     /// Per pixel, the largest luminance error that stays invisible (cd/m², written as EXR).
     #[command(after_help = TOLERANCE_EXAMPLES)]
     Tolerance(ToleranceArgs),
+    /// An interactive viewer in the browser: move the light level, play light and dark
+    /// adaptation, inspect pixels (a local web server).
+    #[cfg(feature = "serve")]
+    #[command(after_help = SERVE_EXAMPLES)]
+    Serve(ServeArgs),
 }
 
 // ---- flag groups shared by several commands (`#[command(flatten)]`) ----
@@ -607,4 +612,67 @@ pub struct VideoArgs {
     /// Print one JSON object per frame (JSON Lines) on standard output as frames are written.
     #[arg(long)]
     pub json: bool,
+}
+
+// ---- the viewer in the browser ----
+
+#[cfg(feature = "serve")]
+const SERVE_EXAMPLES: &str = "\
+Examples:
+  visadapt serve scene.hdr                      # opens http://127.0.0.1:8765/ in the browser
+  visadapt serve render.exr --port 0 --no-open  # any free port; the URL is printed
+  visadapt serve photo.pfm --scale 179 --fov 40
+
+The page maps the image as the controls move (all model work is the library's). Its API, for
+scripts: GET /api/frame?peak=L&t=S&from=L0&display_max=D&fov=F&acuity=0|1&width=W&mode=model|exposure
+(PNG), /api/report?... (JSON, the keys of map --json), /api/pixel?x=&y=&change=C&... (JSON).
+Ctrl-C stops the server.";
+
+#[cfg(feature = "serve")]
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// Input HDR image (format detected from its contents).
+    pub input: PathBuf,
+
+    /// TCP port to listen on; 0 for any free port.
+    #[arg(long, value_name = "P", default_value_t = 8765)]
+    pub port: u16,
+
+    /// Address to listen on. The default is loopback: only this machine can connect.
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1")]
+    pub host: String,
+
+    /// Do not open the page in a web browser.
+    #[arg(long)]
+    pub no_open: bool,
+
+    /// Multiply the input values by S to get cd/m² (e.g. 179 for radiance in W/sr/m²).
+    #[arg(long, allow_negative_numbers = true, value_name = "S")]
+    pub scale: Option<f64>,
+
+    /// Display maximum luminance in cd/m² the page starts with.
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "L",
+        default_value_t = 80.0
+    )]
+    pub display_max: f64,
+
+    /// Horizontal field of view of the image in degrees (perspective) the page starts with
+    /// [default: the file's VIEW, else 60].
+    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
+    pub fov: Option<f64>,
+
+    /// Start with the acuity blur (Eq. 7) off.
+    #[arg(long)]
+    pub no_acuity: bool,
+
+    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
+    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
+    pub hot_pixel_fraction: f64,
+
+    /// Largest accepted input in pixels (width x height).
+    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
+    pub max_pixels: u64,
 }

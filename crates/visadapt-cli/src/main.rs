@@ -49,6 +49,8 @@ fn main() -> ExitCode {
         cli::Command::Plot(args) => commands::plot::run(args),
         cli::Command::Visible(args) => commands::visible::run(args),
         cli::Command::Tolerance(args) => commands::tolerance::run(args),
+        #[cfg(feature = "serve")]
+        cli::Command::Serve(args) => commands::serve::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

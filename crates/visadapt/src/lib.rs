@@ -22,6 +22,7 @@
 //! | [`sequence`] | image sequences of light and dark adaptation, animated PNG | Sec. 5, Fig. 12 |
 //! | [`chart`] | the paper's test scene: ColorChecker, Snellen chart, gratings, spectral | Sec. 5, Fig. 11 |
 //! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
+//! | [`preview`] | the operator at preview resolution, a plain exposure, one pixel probed | Sec. 4, Eq. 4–7 |
 //! | [`visibility`] | thresholds per pixel, differences in JNDs, tolerance map, convergence test | Eq. 4–7, Sec. 6 |
 //! | [`io`] | Radiance, OpenEXR and PFM in; PNG, JPEG and EXR out | — |
 //! | `report` | the JSON reports of the CLI, Python and the viewer (feature `json`) | — |
@@ -43,6 +44,7 @@ mod limits;
 pub mod mesopic;
 pub mod observer;
 pub mod operator;
+pub mod preview;
 #[cfg(feature = "json")]
 pub mod report;
 pub mod scale;

@@ -5,6 +5,8 @@ pub mod map;
 pub mod observer;
 pub mod plot;
 pub mod sequence;
+#[cfg(feature = "serve")]
+pub mod serve;
 pub mod timecourse;
 pub mod tolerance;
 pub mod video;

@@ -1,0 +1,123 @@
+//! `visadapt serve`: an interactive viewer in the browser. A local HTTP server (axum on a
+//! small tokio runtime) holds the decoded image and serves one page (plain HTML, CSS and
+//! JavaScript compiled into the binary, no external requests) and a JSON/PNG API whose
+//! every frame, report and pixel comes from the library.
+
+mod api;
+mod viewer;
+
+use crate::cli::ServeArgs;
+use anyhow::{Context, bail};
+use std::sync::{Arc, Mutex};
+use visadapt::Limits;
+use visadapt::io;
+
+pub fn run(args: ServeArgs) -> anyhow::Result<()> {
+    for (name, v) in [("--scale", args.scale), ("--fov", args.fov)] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            bail!("invalid {name} {v}: must be a positive, finite number");
+        }
+    }
+    if let Some(fov) = args.fov
+        && fov >= 180.0
+    {
+        bail!("invalid --fov {fov}: must be below 180 degrees (perspective)");
+    }
+    let defaults = viewer::Defaults {
+        display_max_cd_m2: args.display_max,
+        fov_deg: args.fov,
+        acuity: !args.no_acuity,
+    };
+    visadapt::operator::ViewingConditions {
+        display_max_cd_m2: args.display_max,
+        hot_pixel_fraction: args.hot_pixel_fraction,
+        ..Default::default()
+    }
+    .validate()?;
+
+    let limits = Limits {
+        max_pixels: args.max_pixels,
+    };
+    let mut image =
+        io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
+    let scale = match args.scale {
+        Some(s) => s,
+        None => {
+            super::warn_if_relative(&args.input, &image);
+            1.0
+        }
+    };
+    if scale != 1.0 {
+        image.scale(scale as f32);
+    }
+    let (width, height) = (image.width, image.height);
+    let viewer = viewer::Viewer::new(
+        args.input.clone(),
+        image,
+        scale,
+        args.hot_pixel_fraction,
+        defaults,
+    );
+    let app = api::router(Arc::new(Mutex::new(viewer)));
+
+    // Two workers are plenty for one user's page; the model's own parallelism is rayon's.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the server's runtime")?;
+    runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind((args.host.as_str(), args.port))
+            .await
+            .with_context(|| format!("cannot listen on {}:{}", args.host, args.port))?;
+        let address = listener.local_addr()?;
+        if !address.ip().is_loopback() {
+            log::warn!("listening on {address}: other machines can reach the viewer and the image");
+        }
+        let url = format!("http://{address}/");
+        println!(
+            "visadapt: serving {} ({width}x{height}) at {url} (Ctrl-C to stop)",
+            args.input.display()
+        );
+        if !args.no_open {
+            let url = url.clone();
+            std::thread::spawn(move || {
+                if let Err(e) = webbrowser::open(&url) {
+                    log::warn!("cannot open a browser ({e}); open {url} yourself");
+                }
+            });
+        }
+        axum::serve(listener, app)
+            .with_graceful_shutdown(stop_signal())
+            .await
+            .context("the server failed")?;
+        println!("visadapt: stopped");
+        anyhow::Ok(())
+    })
+}
+
+/// Ctrl-C (SIGINT), or SIGTERM on Unix.
+async fn stop_signal() {
+    let interrupt = async {
+        if tokio::signal::ctrl_c().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        _ = interrupt => {}
+        _ = terminate => {}
+    }
+}
