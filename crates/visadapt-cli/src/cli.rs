@@ -646,33 +646,20 @@ pub struct ServeArgs {
     #[arg(long)]
     pub no_open: bool,
 
-    /// Multiply the input values by S to get cd/m² (e.g. 179 for radiance in W/sr/m²).
-    #[arg(long, allow_negative_numbers = true, value_name = "S")]
-    pub scale: Option<f64>,
+    // --scale gives the input's units; --peak the level the page starts at.
+    #[command(flatten)]
+    pub units: UnitsArgs,
 
-    /// Display maximum luminance in cd/m² the page starts with.
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "L",
-        default_value_t = 80.0
-    )]
-    pub display_max: f64,
+    // The display maximum, field of view and acuity the page starts with.
+    #[command(flatten)]
+    pub display: DisplayArgs,
 
-    /// Horizontal field of view of the image in degrees (perspective) the page starts with
-    /// [default: the file's VIEW, else 60].
-    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
-    pub fov: Option<f64>,
+    #[command(flatten)]
+    pub view: ViewArgs,
 
-    /// Start with the acuity blur (Eq. 7) off.
-    #[arg(long)]
-    pub no_acuity: bool,
+    #[command(flatten)]
+    pub viewing: ViewingArgs,
 
-    /// Fraction of pixels allowed to be brighter than the "highest visible" luminance.
-    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
-    pub hot_pixel_fraction: f64,
-
-    /// Largest accepted input in pixels (width x height).
-    #[arg(long, value_name = "N", default_value_t = visadapt::Limits::default().max_pixels)]
-    pub max_pixels: u64,
+    #[command(flatten)]
+    pub limits: LimitsArgs,
 }

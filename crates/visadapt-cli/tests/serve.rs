@@ -173,6 +173,14 @@ fn report_and_full_frame_equal_map() {
         // The full-resolution frame is map's PNG, byte for byte in its pixels.
         assert_eq!(server.png(&format!("/api/frame?{query}")), png, "{query}");
     }
+    // The flags set the page's starting point: `serve --peak` is `map --peak`.
+    let started = Server::start(&image, &["--peak", "0.04", "--display-max", "120"]);
+    let (report, _) = map(
+        &image,
+        &["--peak", "0.04", "--display-max", "120"],
+        dir.path(),
+    );
+    assert_eq!(started.json("/api/report"), report);
 }
 
 #[test]

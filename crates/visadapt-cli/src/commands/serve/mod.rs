@@ -9,57 +9,36 @@ mod viewer;
 use crate::cli::ServeArgs;
 use anyhow::{Context, bail};
 use std::sync::{Arc, Mutex};
-use visadapt::Limits;
 use visadapt::io;
 
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
-    for (name, v) in [("--scale", args.scale), ("--fov", args.fov)] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0)
-        {
-            bail!("invalid {name} {v}: must be a positive, finite number");
-        }
-    }
-    if let Some(fov) = args.fov
+    args.units.validate()?;
+    args.view.validate()?;
+    if let Some(fov) = args.view.fov
         && fov >= 180.0
     {
         bail!("invalid --fov {fov}: must be below 180 degrees (perspective)");
     }
+    let conditions = args
+        .viewing
+        .conditions(Some(&args.display), None, Some(&args.view));
+    conditions.validate()?;
     let defaults = viewer::Defaults {
-        display_max_cd_m2: args.display_max,
-        fov_deg: args.fov,
-        acuity: !args.no_acuity,
+        display_max_cd_m2: conditions.display_max_cd_m2,
+        fov_deg: args.view.fov,
+        acuity: conditions.acuity,
     };
-    visadapt::operator::ViewingConditions {
-        display_max_cd_m2: args.display_max,
-        hot_pixel_fraction: args.hot_pixel_fraction,
-        ..Default::default()
-    }
-    .validate()?;
 
-    let limits = Limits {
-        max_pixels: args.max_pixels,
-    };
-    let mut image =
-        io::read(&args.input, &limits).with_context(|| args.input.display().to_string())?;
-    let scale = match args.scale {
-        Some(s) => s,
-        None => {
-            super::warn_if_relative(&args.input, &image);
-            1.0
-        }
-    };
+    let mut image = io::read(&args.input, &args.limits.limits())
+        .with_context(|| args.input.display().to_string())?;
+    let scale = args
+        .units
+        .factor(&args.input, &image, conditions.hot_pixel_fraction)?;
     if scale != 1.0 {
         image.scale(scale as f32);
     }
     let (width, height) = (image.width, image.height);
-    let viewer = viewer::Viewer::new(
-        args.input.clone(),
-        image,
-        scale,
-        args.hot_pixel_fraction,
-        defaults,
-    );
+    let viewer = viewer::Viewer::new(args.input.clone(), image, scale, conditions, defaults);
     let app = api::router(Arc::new(Mutex::new(viewer)));
 
     // Two workers are plenty for one user's page; the model's own parallelism is rayon's.

@@ -2,10 +2,8 @@
 //! the current light level, the planned reports, preview copies, the last frame), so that a
 //! slider move costs one preview `apply` and a PNG encode. All model work is the library's.
 
-use crate::report;
 use serde_json::{Value, json};
 use std::path::PathBuf;
-use visadapt::adaptation::highest_visible;
 use visadapt::operator::{self, Mapping, PixelStats, Report, ViewingConditions};
 use visadapt::preview;
 use visadapt::timecourse::Adaptation;
@@ -106,12 +104,13 @@ pub struct Viewer {
     path: PathBuf,
     /// The decoded file, times `--scale`.
     base: HdrImage,
-    /// `--scale` (1 without it).
+    /// The factor `--scale` or `--peak` applied to the file (1 without them).
     base_scale: f64,
-    /// Highest visible luminance of `base`, cd/m² (what `peak` rescales).
-    base_highest_visible: f64,
-    hot_pixel_fraction: f64,
+    /// The conditions of the `serve` flags; a request sets display, view and acuity.
+    conditions: ViewingConditions,
     pub defaults: Defaults,
+    /// [`HdrImage::peak_factor`] of `base` for the levels asked for.
+    factors: Vec<(u64, f64)>,
     /// `base` times `scaled_factor`, at full resolution.
     scaled: HdrImage,
     scaled_factor: Option<f64>,
@@ -135,17 +134,16 @@ impl Viewer {
         path: PathBuf,
         base: HdrImage,
         base_scale: f64,
-        hot_pixel_fraction: f64,
+        conditions: ViewingConditions,
         defaults: Defaults,
     ) -> Self {
-        let base_highest_visible = f64::from(highest_visible(&base.y, hot_pixel_fraction));
         Viewer {
             path,
             base,
             base_scale,
-            base_highest_visible,
-            hot_pixel_fraction,
+            conditions,
             defaults,
+            factors: Vec::new(),
             scaled: HdrImage::zeros(0, 0),
             scaled_factor: None,
             plans: Vec::new(),
@@ -166,6 +164,7 @@ impl Viewer {
     /// Forget every cached result (after a request panicked half-way).
     pub fn clear_caches(&mut self) {
         self.scaled_factor = None;
+        self.factors.clear();
         self.plans.clear();
         self.stats.clear();
         self.previews.clear();
@@ -173,17 +172,28 @@ impl Viewer {
         self.frame_key = None;
     }
 
-    /// The factor that puts the scene at `level` (its highest visible luminance), as
-    /// `visadapt map --peak` does; 1 for the file's own level.
-    fn factor(&self, level: Option<f64>) -> Outcome<f64> {
-        match level {
-            None => Ok(1.0),
-            Some(_) if self.base_highest_visible <= 0.0 => Err(Failure::BadRequest(format!(
-                "{}: the image has no visible luminance to rescale",
-                self.path.display()
-            ))),
-            Some(l) => Ok(l / self.base_highest_visible),
+    /// The factor that puts the scene at `level` (its highest visible luminance),
+    /// [`HdrImage::peak_factor`] as `visadapt map --peak` uses it; 1 for the level the
+    /// server started at.
+    fn factor(&mut self, level: Option<f64>) -> Outcome<f64> {
+        let Some(level) = level else { return Ok(1.0) };
+        if let Some((_, f)) = self.factors.iter().find(|(k, _)| *k == level.to_bits()) {
+            return Ok(*f);
         }
+        let f = self
+            .base
+            .peak_factor(level, self.conditions.hot_pixel_fraction)
+            .map_err(|e| match e {
+                visadapt::Error::InvalidParameter { reason, .. } => {
+                    Failure::BadRequest(format!("{}: peak {level}: {reason}", self.path.display()))
+                }
+                e => e.into(),
+            })?;
+        if self.factors.len() == PLANS_KEPT {
+            self.factors.remove(0);
+        }
+        self.factors.push((level.to_bits(), f));
+        Ok(f)
     }
 
     fn ensure_scaled(&mut self, factor: f64) {
@@ -199,12 +209,11 @@ impl Viewer {
     fn conditions(&self, p: &Params) -> ViewingConditions {
         ViewingConditions {
             display_max_cd_m2: p.display_max_cd_m2,
-            hot_pixel_fraction: self.hot_pixel_fraction,
             acuity: p.acuity,
             view: p
                 .fov_deg
                 .map(|fov| View::perspective(fov, self.base.width, self.base.height)),
-            ..ViewingConditions::default()
+            ..self.conditions.clone()
         }
     }
 
@@ -238,7 +247,8 @@ impl Viewer {
         let eye = match p.switch {
             None => None,
             Some((from, t)) => {
-                let (_, before) = self.plan(self.factor(Some(from))?, p)?;
+                let before_scale = self.factor(Some(from))?;
+                let (_, before) = self.plan(before_scale, p)?;
                 let mut eye = Adaptation::adapted(
                     before.world_adaptation_cd_m2,
                     before.world_adaptation_scotopic_cd_m2,
@@ -354,7 +364,7 @@ impl Viewer {
                 stats
             }
         };
-        let mut json = report::map_json(&s.after, &stats, self.base_scale * s.scale);
+        let mut json = visadapt::report::map_json(&s.after, &stats, self.base_scale * s.scale);
         if let (Some(eye), Some((from, t))) = (&s.eye, p.switch) {
             let m = &s.model;
             json["time_course"] = json!({
