@@ -13,6 +13,7 @@ use std::path::PathBuf;
     name = "visadapt",
     version,
     propagate_version = true,
+    arg_required_else_help = true,
     max_term_width = 100
 )]
 pub struct Cli {
@@ -75,6 +76,7 @@ pub struct UnitsArgs {
     #[arg(
         long,
         allow_negative_numbers = true,
+        value_parser = positive,
         value_name = "S",
         conflicts_with = "peak"
     )]
@@ -82,7 +84,7 @@ pub struct UnitsArgs {
 
     /// Rescale so that the highest visible luminance is L cd/m² (the paper's "scene
     /// illuminated at L cd/m²").
-    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    #[arg(long, allow_negative_numbers = true, value_parser = positive, value_name = "L")]
     pub peak: Option<f64>,
 }
 
@@ -93,6 +95,7 @@ pub struct DisplayArgs {
     #[arg(
         long,
         allow_negative_numbers = true,
+        value_parser = positive,
         value_name = "L",
         default_value_t = visadapt::adaptation::DEFAULT_DISPLAY_MAX_CD_M2
     )]
@@ -104,26 +107,40 @@ pub struct DisplayArgs {
 #[derive(Debug, Clone, Args)]
 pub struct WorldAdaptationArgs {
     /// World adaptation luminance in cd/m² [default: half the highest visible luminance].
-    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    #[arg(long, allow_negative_numbers = true, value_parser = positive, value_name = "L")]
     pub world_adaptation: Option<f64>,
 
     /// World rod adaptation in scotopic cd/m² [default: half the highest visible scotopic
     /// luminance, or the world adaptation times the image's scotopic/photopic ratio].
-    #[arg(long, allow_negative_numbers = true, value_name = "LS")]
+    #[arg(long, allow_negative_numbers = true, value_parser = positive, value_name = "LS")]
     pub scotopic_adaptation: Option<f64>,
 }
 
 /// The view of the image and the acuity blur (map, visible, sequence, video).
 #[derive(Debug, Clone, Args)]
 pub struct ViewArgs {
-    /// Horizontal field of view of the image in degrees (perspective). Overrides the
-    /// file's VIEW; without either, 60 degrees is assumed.
-    #[arg(long, allow_negative_numbers = true, value_name = "DEG")]
+    /// Horizontal field of view of the image in degrees. Overrides the file's view;
+    /// without either, a 60-degree perspective view is assumed.
+    #[arg(long, allow_negative_numbers = true, value_parser = positive, value_name = "DEG")]
     pub fov: Option<f64>,
+
+    /// Projection of the image for --fov: perspective (under 180 degrees) or an angular
+    /// fisheye (pixels uniform in angle, up to 360 degrees).
+    #[arg(long, value_enum, value_name = "KIND", default_value_t = ProjectionArg::Perspective, requires = "fov")]
+    pub projection: ProjectionArg,
 
     /// Skip the acuity blur (Eq. 7).
     #[arg(long)]
     pub no_acuity: bool,
+}
+
+/// The projections `--projection` offers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ProjectionArg {
+    /// Planar perspective: uniform on the image plane, under 180 degrees.
+    Perspective,
+    /// Angular fisheye: uniform in angle from the centre, up to 360 degrees.
+    Fisheye,
 }
 
 /// Model options every image command has (map, visible, tolerance, sequence, video).
@@ -131,7 +148,7 @@ pub struct ViewArgs {
 pub struct ViewingArgs {
     /// Fraction of pixels allowed to be brighter than the "highest visible" luminance,
     /// so that a few hot pixels do not set the adaptation.
-    #[arg(long, allow_negative_numbers = true, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
+    #[arg(long, allow_negative_numbers = true, value_parser = fraction, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
     pub hot_pixel_fraction: f64,
 }
 
@@ -182,11 +199,75 @@ impl ViewingArgs {
 }
 
 impl ViewArgs {
-    /// The view `--fov` gives an image of `width × height` pixels; `None` to use the
-    /// file's.
+    /// The view `--fov` and `--projection` give an image of `width × height` pixels;
+    /// `None` to use the file's.
     pub fn view(&self, width: usize, height: usize) -> Option<visadapt::View> {
-        self.fov
-            .map(|fov| visadapt::View::perspective(fov, width, height))
+        self.fov.map(|fov| match self.projection {
+            ProjectionArg::Perspective => visadapt::View::perspective(fov, width, height),
+            ProjectionArg::Fisheye => visadapt::View::angular_fisheye(fov, width, height),
+        })
+    }
+
+    /// Check the flags together: a perspective view spans less than 180 degrees, a
+    /// fisheye at most 360.
+    pub fn check(&self) -> Result<(), String> {
+        match (self.fov, self.projection) {
+            (Some(fov), ProjectionArg::Perspective) if fov >= 180.0 => Err(format!(
+                "invalid value '{fov}' for '--fov <DEG>': a perspective view spans less than 180 degrees (use --projection fisheye)"
+            )),
+            (Some(fov), ProjectionArg::Fisheye) if fov > 360.0 => Err(format!(
+                "invalid value '{fov}' for '--fov <DEG>': a fisheye view spans at most 360 degrees"
+            )),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Cli {
+    /// Checks of flags against each other that clap's parsers cannot make alone, as usage
+    /// errors in clap's own style.
+    pub fn check(&self) -> Result<(), clap::Error> {
+        let (name, result) = match &self.command {
+            Command::Map(a) => ("map", a.view.check().and_then(|()| a.check_format_flags())),
+            Command::Visible(a) => ("visible", a.view.check()),
+            Command::Sequence(a) => ("sequence", a.view.check()),
+            Command::Video(a) => ("video", a.view.check()),
+            _ => return Ok(()),
+        };
+        result.map_err(|message| {
+            let mut cli = <Cli as clap::CommandFactory>::command();
+            cli.build();
+            let mut sub = cli
+                .find_subcommand(name)
+                .expect("the subcommand exists")
+                .clone();
+            sub.error(clap::error::ErrorKind::ArgumentConflict, message)
+        })
+    }
+}
+
+impl MapArgs {
+    /// `--bits` is for PNG output and `--quality` for JPEG: refuse them with another format.
+    fn check_format_flags(&self) -> Result<(), String> {
+        let ext = self
+            .output
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .unwrap_or_default();
+        if self.bits.is_some() && ext != "png" {
+            return Err(format!(
+                "--bits applies to PNG output only, not to '{}'",
+                self.output.display()
+            ));
+        }
+        if self.quality.is_some() && !matches!(ext.as_str(), "jpg" | "jpeg") {
+            return Err(format!(
+                "--quality applies to JPEG output only, not to '{}'",
+                self.output.display()
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -229,13 +310,13 @@ pub struct MapArgs {
     #[command(flatten)]
     pub viewing: ViewingArgs,
 
-    /// Bits per channel of PNG output.
-    #[arg(long, value_name = "BITS", default_value_t = 8, value_parser = parse_bits)]
-    pub bits: u8,
+    /// Bits per channel of PNG output [default: 8].
+    #[arg(long, value_name = "BITS", value_parser = parse_bits)]
+    pub bits: Option<u8>,
 
-    /// JPEG quality (1-100).
-    #[arg(long, value_name = "Q", default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
-    pub quality: u8,
+    /// JPEG quality (1-100) [default: 90].
+    #[arg(long, value_name = "Q", value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub quality: Option<u8>,
 
     #[command(flatten)]
     pub limits: LimitsArgs,
@@ -248,11 +329,11 @@ pub struct MapArgs {
 #[derive(Debug, Args)]
 pub struct ObserverArgs {
     /// Adaptation luminance in cd/m².
-    #[arg(value_name = "L", allow_negative_numbers = true)]
+    #[arg(value_name = "L", allow_negative_numbers = true, value_parser = positive)]
     pub adaptation: f64,
 
     /// Scotopic adaptation in scotopic cd/m² [default: L x 2.261, equal-energy white].
-    #[arg(long, value_name = "LS", allow_negative_numbers = true)]
+    #[arg(long, value_name = "LS", allow_negative_numbers = true, value_parser = positive)]
     pub scotopic: Option<f64>,
 
     #[command(flatten)]
@@ -285,6 +366,33 @@ fn parse_memory(s: &str) -> Result<u64, String> {
     match n.checked_mul(1 << shift) {
         Some(0) | None => Err(format!("{s}: must be between 1 byte and 16 EiB")),
         Some(v) => Ok(v),
+    }
+}
+
+/// A positive, finite number: luminances, factors, angles, rates.
+fn positive(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        Ok(_) => Err("must be a positive, finite number".into()),
+        Err(_) => Err("not a number".into()),
+    }
+}
+
+/// A finite number of zero or more, e.g. a time in seconds.
+fn non_negative(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        Ok(_) => Err("must be a finite number, zero or more".into()),
+        Err(_) => Err("not a number".into()),
+    }
+}
+
+/// A fraction in [0, 1).
+fn fraction(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..1.0).contains(&v) => Ok(v),
+        Ok(_) => Err("must be in [0, 1)".into()),
+        Err(_) => Err("not a number".into()),
     }
 }
 
@@ -325,13 +433,13 @@ pub struct ChartArgs {
     pub output: PathBuf,
 
     /// Luminance of the white patch and the Snellen chart's paper, cd/m².
-    #[arg(long, value_name = "L", allow_negative_numbers = true)]
+    #[arg(long, value_name = "L", allow_negative_numbers = true, value_parser = positive)]
     pub white: f64,
 
     /// Horizontal field of view of the scene in degrees: the viewer stands where the scene
     /// spans DEG, the image keeps its size [default: 20 ft (6.096 m), the Snellen design
     /// distance, where line 20/x tests 20/x acuity].
-    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true, value_parser = positive)]
     pub fov: Option<f64>,
 
     /// Leave out the square-wave gratings.
@@ -346,7 +454,7 @@ pub struct DemoArgs {
     pub output: PathBuf,
 
     /// Luminances of the white patch to render, cd/m², comma-separated.
-    #[arg(long, value_name = "L,...", value_delimiter = ',', allow_negative_numbers = true,
+    #[arg(long, value_name = "L,...", value_delimiter = ',', allow_negative_numbers = true, value_parser = positive,
           default_values_t = [1000.0, 10.0, 0.04, 0.001])]
     pub levels: Vec<f64>,
 
@@ -357,7 +465,8 @@ pub struct DemoArgs {
 
 #[derive(Debug, Args)]
 pub struct PlotArgs {
-    /// The figure to draw.
+    /// The figure to draw, by name or by the paper's figure number: fig2, fig3, fig4, fig7,
+    /// fig8, fig9 or fig10 (figs. 8-10 are one plot).
     #[arg(value_enum, value_name = "NAME")]
     pub name: PlotName,
 
@@ -382,7 +491,7 @@ pub enum PlotName {
     #[value(name = "acuity", alias = "fig7")]
     Acuity,
     /// Figs. 8-10: the time course of light (rods, cones) and dark adaptation.
-    #[value(name = "timecourse", alias = "fig8-10")]
+    #[value(name = "timecourse", aliases = ["fig8-10", "fig8", "fig9", "fig10"])]
     Timecourse,
 }
 
@@ -416,8 +525,9 @@ pub struct VisibleArgs {
     #[arg(value_name = "TEST")]
     pub test: PathBuf,
 
-    /// Write a heat map of the JNDs with a colour bar (PNG).
-    #[arg(short, long, value_name = "MAP.png")]
+    /// Write the JNDs: a heat map with a colour bar (.png) or the JND of every pixel as
+    /// 32-bit floats, one channel Y (.exr).
+    #[arg(short, long, value_name = "MAP")]
     pub output: Option<PathBuf>,
 
     #[command(flatten)]
@@ -496,16 +606,16 @@ OUT_DIR/<input name>.<format>, each written as soon as it is done.";
 #[derive(Debug, Args)]
 pub struct TimecourseArgs {
     /// Luminance the observer is adapted to before t = 0, cd/m².
-    #[arg(long, value_name = "L0", allow_negative_numbers = true)]
+    #[arg(long, value_name = "L0", allow_negative_numbers = true, value_parser = positive)]
     pub from: f64,
 
     /// Luminance from t = 0 on, cd/m².
-    #[arg(long, value_name = "L1", allow_negative_numbers = true)]
+    #[arg(long, value_name = "L1", allow_negative_numbers = true, value_parser = positive)]
     pub to: f64,
 
     /// Times after the change, seconds, comma-separated, sorted.
     #[arg(long, value_name = "T1,T2,...", value_delimiter = ',', required = true)]
-    #[arg(allow_hyphen_values = true)]
+    #[arg(allow_hyphen_values = true, value_parser = non_negative)]
     pub times: Vec<f64>,
 
     #[command(flatten)]
@@ -522,16 +632,16 @@ pub struct SequenceArgs {
     pub input: PathBuf,
 
     /// Highest visible luminance of the scene before the switch, cd/m².
-    #[arg(long, value_name = "L0", allow_negative_numbers = true)]
+    #[arg(long, value_name = "L0", allow_negative_numbers = true, value_parser = positive)]
     pub from: f64,
 
     /// Highest visible luminance after the switch, cd/m².
-    #[arg(long, value_name = "L1", allow_negative_numbers = true)]
+    #[arg(long, value_name = "L1", allow_negative_numbers = true, value_parser = positive)]
     pub to: f64,
 
     /// Times after the switch, seconds, comma-separated, sorted; one frame each.
     #[arg(long, value_name = "T1,T2,...", value_delimiter = ',', required = true)]
-    #[arg(allow_hyphen_values = true)]
+    #[arg(allow_hyphen_values = true, value_parser = non_negative)]
     pub times: Vec<f64>,
 
     /// Directory for the numbered PNG frames (created if missing).
@@ -581,7 +691,7 @@ pub struct VideoArgs {
     pub pattern: String,
 
     /// Frames per second of the input: the time step of the adaptation is 1/F.
-    #[arg(long, value_name = "F", allow_negative_numbers = true)]
+    #[arg(long, value_name = "F", allow_negative_numbers = true, value_parser = positive)]
     pub fps: f64,
 
     /// Output directory (created if missing).
@@ -594,7 +704,7 @@ pub struct VideoArgs {
 
     /// Multiply every frame's values by S to get cd/m² (one factor for all frames, so the
     /// changes between frames are kept).
-    #[arg(long, allow_negative_numbers = true, value_name = "S")]
+    #[arg(long, allow_negative_numbers = true, value_parser = positive, value_name = "S")]
     pub scale: Option<f64>,
 
     #[command(flatten)]

@@ -17,27 +17,13 @@ fn main() -> ExitCode {
         .format_target(false)
         .format_timestamp(None)
         .init();
-    let cli = match cli::Cli::try_parse() {
-        Ok(cli) => cli,
-        // Usage errors: one line (clap's first), exit status 2 as clap does.
-        Err(e) if e.use_stderr() => {
-            let text = e.to_string();
-            let line: Vec<&str> = text
-                .lines()
-                .take_while(|l| {
-                    !l.starts_with("Usage:")
-                        && !l.starts_with("For more information")
-                        && !l.trim_start().starts_with("tip:")
-                })
-                .map(str::trim)
-                .filter(|l| !l.is_empty())
-                .collect();
-            eprintln!("visadapt: {}", line.join(" "));
-            return ExitCode::from(2);
-        }
-        // --help and --version.
-        Err(e) => e.exit(),
-    };
+    // Usage errors are clap's own: the message, its "tip:" for a near miss, the Usage line
+    // and the pointer to --help, exit status 2. `visadapt` alone prints the help. The
+    // one-line rule is for run-time errors, below.
+    let cli = cli::Cli::parse();
+    if let Err(e) = cli.check() {
+        e.exit();
+    }
     let result = match cli.command {
         cli::Command::Map(args) => commands::map::run(args),
         cli::Command::Observer(args) => commands::observer::run(args),

@@ -43,8 +43,8 @@ fn observer_rejects_impossible_luminances() {
     for bad in ["0", "-1", "nan", "inf"] {
         let out = visadapt().args(["observer", bad]).output().unwrap();
         assert!(!out.status.success(), "{bad}");
-        let e = one_line_error(&out.stderr);
-        assert!(e.contains("adaptation"), "{e}");
+        let e = usage_error(&out.stderr);
+        assert!(e.contains("'<L>'") && e.contains("positive"), "{e}");
     }
     let out = visadapt().args(["observer", "abc"]).output().unwrap();
     assert!(!out.status.success());
@@ -213,7 +213,7 @@ fn bad_arguments_fail_cleanly() {
             .output()
             .unwrap();
         assert!(!out.status.success(), "{args:?}");
-        let e = one_line_error(&out.stderr);
+        let e = cli_error(&out.stderr);
         assert!(e.contains(what), "{args:?}: {e}");
     }
     // Never overwrite the input, even spelled differently.

@@ -127,7 +127,7 @@ fn demo_levels_can_be_chosen_and_bad_levels_are_refused() {
             .arg(&out)
             .assert()
             .failure();
-        let e = one_line(&run.get_output().stderr);
+        let e = cli_error(&run.get_output().stderr);
         assert!(e.contains("level"), "{bad}: {e}");
         assert!(!out.exists(), "{bad}: the output directory was created");
     }
@@ -211,7 +211,7 @@ fn chart_refuses_bad_input_without_writing() {
             .arg(&path)
             .assert()
             .failure();
-        let e = one_line(&run.get_output().stderr);
+        let e = cli_error(&run.get_output().stderr);
         assert!(e.contains(needle), "{args:?}: {e}");
         assert!(!path.exists());
     }
@@ -278,7 +278,7 @@ fn plot_refuses_unknown_names_and_formats_without_writing() {
         .arg(&out)
         .assert()
         .code(2);
-    let e = one_line(&run.get_output().stderr);
+    let e = cli_error(&run.get_output().stderr);
     assert!(e.contains("fig99") && e.contains("tvi"), "{e}");
     let run = visadapt()
         .args(["plot", "tvi", "-o"])

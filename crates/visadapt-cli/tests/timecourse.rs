@@ -160,7 +160,7 @@ fn timecourse_refuses_bad_input_in_one_line() {
     ] {
         let out = visadapt().arg("timecourse").args(&args).output().unwrap();
         assert!(!out.status.success(), "{args:?}");
-        let e = one_line_error(&out.stderr);
+        let e = cli_error(&out.stderr);
         assert!(e.contains(needle), "{args:?}: {e}");
         assert!(out.stdout.is_empty());
     }
@@ -252,7 +252,7 @@ fn sequence_refuses_bad_input_before_writing() {
             .output()
             .unwrap();
         assert!(!out.status.success());
-        let e = one_line_error(&out.stderr);
+        let e = cli_error(&out.stderr);
         assert!(e.contains(needle), "{e}");
         assert!(!outdir.exists());
     }
@@ -441,7 +441,7 @@ fn video_refuses_bad_patterns_and_frame_rates_before_writing() {
             .output()
             .unwrap();
         assert!(!out.status.success(), "{pattern}");
-        let e = one_line_error(&out.stderr);
+        let e = cli_error(&out.stderr);
         assert!(e.contains(needle), "{pattern}: {e}");
         assert!(!outdir.exists(), "{pattern}");
     }

@@ -319,7 +319,7 @@ fn bad_arguments_are_refused_before_reading() {
             .output()
             .unwrap();
         assert!(!out.status.success(), "{extra:?}");
-        let e = one_line_error(&out.stderr);
+        let e = cli_error(&out.stderr);
         assert!(e.contains(needle), "{e}");
     }
     // The map may not replace an input.

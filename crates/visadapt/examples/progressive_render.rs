@@ -63,7 +63,18 @@ const LEVELS: [(&str, f64); 4] = [
     ("starlight", 0.001),
 ];
 
-fn main() -> Result<(), visadapt::Error> {
+fn main() -> std::process::ExitCode {
+    // Errors in a sentence (Display), not a Debug dump.
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("progressive_render: error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), visadapt::Error> {
     let scene = Scene::new();
     // Exact radiance for a light of unit radiance; each level scales the light so that the
     // picture's highest visible luminance (Sec. 4.4's quantile) is the level.
@@ -77,6 +88,15 @@ fn main() -> Result<(), visadapt::Error> {
         ..ViewingConditions::default()
     };
     let out_dir = std::env::args_os().nth(1).map(std::path::PathBuf::from);
+    // The folder is made before minutes of work, not found missing after them.
+    if let Some(dir) = &out_dir {
+        std::fs::create_dir_all(dir).map_err(|e| {
+            visadapt::Error::Io(std::io::Error::new(
+                e.kind(),
+                format!("{}: cannot create the output folder: {e}", dir.display()),
+            ))
+        })?;
+    }
 
     println!(
         "{:<10} {:>10} {:>10} | {:>10} {:>9} | {:>9} {:>7} | true error at the perceptual stop",

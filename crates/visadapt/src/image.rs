@@ -180,6 +180,16 @@ impl View {
         }
     }
 
+    /// An angular fisheye view (Radiance `-vta`) with the given horizontal field of view,
+    /// the vertical one in proportion to the image's height (pixels uniform in angle).
+    pub fn angular_fisheye(horizontal_deg: f64, width: usize, height: usize) -> Self {
+        View {
+            projection: Projection::AngularFisheye,
+            horizontal_deg,
+            vertical_deg: horizontal_deg * height as f64 / width as f64,
+        }
+    }
+
     /// Pixels per degree of visual angle at the image centre, where the eye looks, for an
     /// image `width` pixels wide. `None` for a parallel view or a degenerate angle.
     ///

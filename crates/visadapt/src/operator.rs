@@ -12,7 +12,7 @@
 //! 4. per pixel, the display colour `m_p·XYZ + k·m_s·V·white` (Eq. 6: the cone image keeps
 //!    its chromaticity, "the chromatic channels follow the same mapping"; the rod image is
 //!    grey, the display white), converted to linear sRGB relative to `L_dmax`;
-//! 5. the acuity Gaussian (Eq. 7, [`acuity`](crate::acuity)), a separate stage on the
+//! 5. the acuity Gaussian (Eq. 7, [`acuity`]), a separate stage on the
 //!    linear display planes. Because the mapping of step 4 is affine with coefficients
 //!    shared by all pixels, blurring its output equals mapping the blurred scene;
 //! 6. clipping to what the display can show (see [`apply`]).
@@ -118,6 +118,18 @@ impl ViewingConditions {
                 "fov",
                 v.horizontal_deg,
                 "must be in (0, 360] degrees",
+            ));
+        }
+        // A planar perspective projection cannot span 180° or more (tan(fov/2) is
+        // infinite): refuse it rather than drop the acuity blur without a word.
+        if let Some(v) = &self.view
+            && v.projection == crate::Projection::Perspective
+            && v.horizontal_deg >= 180.0
+        {
+            return Err(Error::invalid(
+                "fov",
+                v.horizontal_deg,
+                "a perspective view spans less than 180 degrees",
             ));
         }
         Ok(())

@@ -24,6 +24,7 @@ pub fn run(args: ChartArgs) -> anyhow::Result<()> {
             args.output.display()
         );
     }
+    super::check_output_folder(&args.output)?;
     let options = match args.fov {
         Some(fov) => ChartOptions::with_fov(args.white, fov, !args.no_gratings)?,
         None => ChartOptions {

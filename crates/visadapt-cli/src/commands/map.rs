@@ -10,9 +10,8 @@ use visadapt::operator::{self, ViewingConditions};
 pub fn run(args: MapArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
     io::output::refuse_same_file(&args.output, &[&args.input])?;
+    super::check_output_folder(&args.output)?;
     let format = output_format(&args)?;
-    args.units.validate()?;
-    args.view.validate()?;
     let conditions =
         args.viewing
             .conditions(Some(&args.display), Some(&args.world), Some(&args.view));
@@ -75,9 +74,11 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
 
 fn output_format(args: &MapArgs) -> anyhow::Result<OutputFormat> {
     Ok(match OutputFormat::from_path(&args.output)? {
-        OutputFormat::Png { .. } => OutputFormat::Png { bits: args.bits },
+        OutputFormat::Png { .. } => OutputFormat::Png {
+            bits: args.bits.unwrap_or(8),
+        },
         OutputFormat::Jpeg { .. } => OutputFormat::Jpeg {
-            quality: args.quality,
+            quality: args.quality.unwrap_or(90),
         },
         f => f,
     })

@@ -12,28 +12,12 @@ pub mod tolerance;
 pub mod video;
 pub mod visible;
 
-use crate::cli::{UnitsArgs, ViewArgs};
+use crate::cli::UnitsArgs;
 use anyhow::bail;
 use std::path::Path;
 use visadapt::HdrImage;
 
-/// `--name v` must be a positive, finite number.
-pub fn positive_flag(name: &str, value: Option<f64>) -> anyhow::Result<()> {
-    if let Some(v) = value
-        && !(v.is_finite() && v > 0.0)
-    {
-        bail!("invalid {name} {v}: must be a positive, finite number");
-    }
-    Ok(())
-}
-
 impl UnitsArgs {
-    /// Check the flags before any file is read.
-    pub fn validate(&self) -> anyhow::Result<()> {
-        positive_flag("--scale", self.scale)?;
-        positive_flag("--peak", self.peak)
-    }
-
     /// The factor that turns an input's values into cd/m²: `--scale S`, or `--peak L` over
     /// its highest visible luminance ([`HdrImage::peak_factor`]), or 1 (with a warning when
     /// the file does not state its units).
@@ -65,11 +49,19 @@ impl UnitsArgs {
     }
 }
 
-impl ViewArgs {
-    /// Check the flags before any file is read.
-    pub fn validate(&self) -> anyhow::Result<()> {
-        positive_flag("--fov", self.fov)
+/// The folder an output goes into must exist: checked before any work, naming the folder.
+pub fn check_output_folder(output: &Path) -> anyhow::Result<()> {
+    if let Some(dir) = output.parent()
+        && !dir.as_os_str().is_empty()
+        && !dir.is_dir()
+    {
+        bail!(
+            "{}: the output folder {} does not exist",
+            output.display(),
+            dir.display()
+        );
     }
+    Ok(())
 }
 
 /// Warn that a file without stated units is read as cd/m².

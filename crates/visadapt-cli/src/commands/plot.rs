@@ -32,6 +32,7 @@ const RODS: RGBColor = RGBColor(30, 70, 200);
 
 pub fn run(args: PlotArgs) -> anyhow::Result<()> {
     let format = PictureFormat::from_path(&args.output)?;
+    super::check_output_folder(&args.output)?;
     render(args.name, format, &args.output)?;
     println!("wrote {} ({})", args.output.display(), title(args.name));
     Ok(())

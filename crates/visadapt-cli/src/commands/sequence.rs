@@ -19,7 +19,6 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
     let from = positive("--from", args.from)?;
     let to = positive("--to", args.to)?;
     sorted_times(&args.times)?;
-    args.view.validate()?;
     if args.apng_delay_ms == 0 {
         bail!("invalid --apng-delay-ms 0: must be at least 1");
     }

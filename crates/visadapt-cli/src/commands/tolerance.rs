@@ -22,8 +22,8 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
             args.output.display()
         );
     }
+    super::check_output_folder(&args.output)?;
     io::output::refuse_same_file(&args.output, &[&args.input])?;
-    args.units.validate()?;
     let conditions = ViewingConditions {
         // The tolerance holds for errors of any extent; acuity does not enter it.
         acuity: false,

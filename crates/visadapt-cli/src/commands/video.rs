@@ -136,8 +136,6 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             args.fps
         );
     }
-    super::positive_flag("--scale", args.scale)?;
-    args.view.validate()?;
     let conditions = args
         .viewing
         .conditions(Some(&args.display), None, Some(&args.view));

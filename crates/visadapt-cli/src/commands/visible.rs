@@ -4,7 +4,7 @@
 //! (Ferwerda et al. 1996, Eq. 4–7).
 
 use crate::cli::VisibleArgs;
-use crate::graphics::{self, PictureFormat};
+use crate::graphics;
 use anyhow::{Context, bail};
 use plotters::style::RGBColor;
 use std::path::Path;
@@ -15,17 +15,15 @@ use visadapt::visibility::{self, Difference, Viewer};
 
 pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
-    args.units.validate()?;
-    args.view.validate()?;
-    if let Some(out) = &args.output {
-        if PictureFormat::from_path(out)? != PictureFormat::Png {
-            bail!(
-                "{}: the heat map is written as PNG (use .png)",
-                out.display()
-            );
+    let map_format = match &args.output {
+        Some(out) => {
+            let format = MapFormat::from_path(out)?;
+            io::output::refuse_same_file(out, &[&args.reference, &args.test])?;
+            super::check_output_folder(out)?;
+            Some(format)
         }
-        io::output::refuse_same_file(out, &[&args.reference, &args.test])?;
-    }
+        None => None,
+    };
     let conditions = args
         .viewing
         .conditions(None, Some(&args.world), Some(&args.view));
@@ -63,9 +61,17 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
             d.non_finite_pixels
         );
     }
-    if let Some(out) = &args.output {
-        let (w, h, rgb) = heat_map(&d)?;
-        graphics::write_rgb_png(out, w, h, &rgb)?;
+    if let (Some(out), Some(format)) = (&args.output, map_format) {
+        match format {
+            MapFormat::HeatMap => {
+                let (w, h, rgb) = heat_map(&d)?;
+                graphics::write_rgb_png(out, w, h, &rgb)?;
+            }
+            MapFormat::Exr => io::display::write_atomically(out, |w| {
+                io::exr::write_plane(d.width, d.height, &d.jnd, w)
+            })
+            .with_context(|| out.display().to_string())?,
+        }
     }
 
     if args.json {
@@ -96,6 +102,33 @@ fn input_scale(
         super::warn_if_relative(&args.test, test);
     }
     Ok(scale)
+}
+
+/// What `visible -o` writes, by the extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum MapFormat {
+    /// `.png`: the heat map with its colour bar.
+    HeatMap,
+    /// `.exr`: the JND of every pixel as 32-bit floats, one channel `Y`.
+    Exr,
+}
+
+impl MapFormat {
+    fn from_path(path: &Path) -> anyhow::Result<Self> {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
+            Some("png") => Ok(MapFormat::HeatMap),
+            Some("exr") => Ok(MapFormat::Exr),
+            _ => bail!(
+                "{}: the map is written as a PNG heat map or an OpenEXR of JNDs (use .png or .exr)",
+                path.display()
+            ),
+        }
+    }
 }
 
 fn text_report(d: &Difference, r: &Report) -> String {

@@ -57,3 +57,22 @@ pub fn ts(l: f64) -> f64 {
         (0.405 * x + 1.6).powf(2.18) - 2.86
     })
 }
+
+/// A usage error in clap's own form: `error: ...`, then the pointer to `--help`.
+pub fn usage_error(stderr: &[u8]) -> String {
+    let s = String::from_utf8_lossy(stderr).into_owned();
+    assert!(s.starts_with("error: "), "not a usage error: {s:?}");
+    assert!(s.contains("For more information, try '--help'."), "{s}");
+    assert!(!s.contains("panicked"), "{s}");
+    s
+}
+
+/// Either kind of error the CLI reports: a usage error (clap's form) or a run-time error
+/// (one line).
+pub fn cli_error(stderr: &[u8]) -> String {
+    if stderr.starts_with(b"error: ") {
+        usage_error(stderr)
+    } else {
+        one_line_error(stderr)
+    }
+}

@@ -1004,6 +1004,20 @@ pub fn write_luminance(
     write_layer(width, height, vec![("Y", plane)], Some(1.0), None, w)
 }
 
+/// Write one plane of numbers that are not luminances (e.g. a
+/// [`visibility`](crate::visibility) JND map) as a single-channel `Y` OpenEXR, 32-bit float,
+/// RLE, without `whiteLuminance`: [`decode`] reads it back unchanged, as relative values.
+pub fn write_plane(
+    width: usize,
+    height: usize,
+    values: &[f32],
+    w: impl std::io::Write + std::io::Seek,
+) -> Result<()> {
+    let plane = values.to_vec();
+    check_planes(width, height, &[&plane])?;
+    write_layer(width, height, vec![("Y", plane)], None, None, w)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

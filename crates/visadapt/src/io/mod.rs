@@ -81,7 +81,7 @@ pub fn read_bytes(path: &Path, limits: &Limits, bytes: &mut Vec<u8>) -> Result<I
     bytes.clear();
     let head_len = (HEAD_LEN as u64).min(limits.max_memory_bytes);
     (&mut file).take(head_len).read_to_end(bytes)?;
-    let format = detect(bytes).ok_or_else(unrecognised)?;
+    let format = detect(bytes).ok_or_else(|| unrecognised(bytes))?;
     let complete = (bytes.len() as u64) < head_len;
     if complete {
         return Ok(format);
@@ -132,7 +132,10 @@ fn format_name(f: InputFormat) -> &'static str {
 }
 
 /// The error for a file of no format we read.
-fn unrecognised() -> Error {
+fn unrecognised(bytes: &[u8]) -> Error {
+    if bytes.is_empty() {
+        return Error::decode("image", "empty file");
+    }
     Error::Unsupported("not a Radiance, OpenEXR or PFM file (unrecognised first bytes)".into())
 }
 
@@ -153,7 +156,7 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
         Some(InputFormat::Radiance) => radiance::decode(bytes, limits),
         Some(InputFormat::OpenExr) => exr::decode(bytes, limits),
         Some(InputFormat::Pfm) => pfm::decode(bytes, limits),
-        None => Err(unrecognised()),
+        None => Err(unrecognised(bytes)),
     }
 }
 

@@ -212,6 +212,13 @@ impl PendingFile {
     pub fn create(target: &Path) -> Result<Self> {
         check_output(target)?;
         let dir = parent_dir(target);
+        // Name the folder the caller gave, not a temporary file's random name.
+        if !dir.is_dir() {
+            return Err(Error::Io(std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("the output folder {} does not exist", dir.display()),
+            )));
+        }
         #[cfg(target_os = "linux")]
         if let Some(file) = unnamed::create(dir) {
             return Ok(PendingFile {
