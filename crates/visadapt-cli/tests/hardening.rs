@@ -30,11 +30,12 @@ fn assert_no_temporaries(dir: &Path) {
     assert!(stray.is_empty(), "{stray:?}");
 }
 
-/// Run `args` and expect a one-line error that mentions `needle`; returns the line.
+/// Run `args` and expect an error that mentions `needle` (one line at run time, clap's
+/// form for a usage error); returns it.
 fn fails_with(dir: &Path, args: &[&str], needle: &str) -> String {
     let out = visadapt().current_dir(dir).args(args).output().unwrap();
     assert!(!out.status.success(), "{args:?} succeeded");
-    let e = one_line_error(&out.stderr);
+    let e = cli_error(&out.stderr);
     assert!(e.contains(needle), "{args:?}: {e}");
     e
 }
