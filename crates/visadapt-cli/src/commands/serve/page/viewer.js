@@ -50,9 +50,13 @@ function query(extra) {
   return p.toString();
 }
 
+// The preview is as wide as it shows on screen (the image fits the view's width and the
+// window's height), in device pixels, at most 1280 and at most the image.
 function previewWidth() {
-  const box = $("stage").clientWidth || 800;
-  const want = Math.round(box * (window.devicePixelRatio || 1));
+  const boxW = $("view").clientWidth || 800;
+  const boxH = Math.max(100, window.innerHeight - 100);
+  const fit = state.width && state.height ? Math.min(boxW, (boxH * state.width) / state.height) : boxW;
+  const want = Math.round(fit * (window.devicePixelRatio || 1));
   return Math.max(1, Math.min(state.width || want, want, 1280));
 }
 
@@ -135,7 +139,8 @@ const pixels = channel(async () => {
 });
 
 function updateBusy() {
-  document.body.dataset.busy = frames.pending() || reports.pending() ? "1" : "0";
+  const waiting = frames.pending() || reports.pending() || state.nativeLevel === null;
+  document.body.dataset.busy = waiting ? "1" : "0";
 }
 
 function refresh() {
@@ -183,7 +188,8 @@ function showReport(r) {
   row(tb, "view", r.view.projection + " " + fmt(r.view.horizontal_fov_deg, "°") + " (" + r.view.source + ")");
   row(tb, "display", fmt(r.display_max_cd_m2, "cd/m²") + ", clipped " + r.pixels_clipped + " px");
   if (state.nativeLevel === null) {
-    // First report: the file's own level sets the slider.
+    // First report: the server's view and the file's own level set the controls.
+    $("fov").placeholder = fmt(r.view.horizontal_fov_deg) + " (" + r.view.source + ")";
     const l = Math.log10(r.highest_visible_cd_m2);
     $("level").value = String(Number.isFinite(l) ? l : 2);
     state.nativeLevel = Number($("level").value);
@@ -292,7 +298,8 @@ function init() {
   window.addEventListener("resize", () => frames.kick());
   setSplit();
   setTimecourse();
-  refresh();
+  // The first report gives the image's size and level; it then asks for the first frame.
+  reports.kick();
 }
 
 init();
