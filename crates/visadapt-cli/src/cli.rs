@@ -232,6 +232,8 @@ impl Cli {
             Command::Visible(a) => ("visible", a.view.check()),
             Command::Sequence(a) => ("sequence", a.view.check()),
             Command::Video(a) => ("video", a.view.check()),
+            #[cfg(feature = "serve")]
+            Command::Serve(a) => ("serve", a.view.check()),
             _ => return Ok(()),
         };
         result.map_err(|message| {

@@ -225,7 +225,7 @@ impl Query {
                 )
             })?
             .unwrap_or(v.defaults.display_max_cd_m2);
-        let fov = match self.get("fov", |s| {
+        let fov = self.get("fov", |s| {
             let f = parse_f64(s, "fov")?;
             if f.is_finite() && f > 0.0 && f < 180.0 {
                 Ok(f)
@@ -234,10 +234,7 @@ impl Query {
                     "invalid fov {s}: must be between 0 and 180 degrees (perspective)"
                 ))
             }
-        })? {
-            Some(f) => Some(f),
-            None => v.defaults.fov_deg,
-        };
+        })?;
         let acuity = self
             .get("acuity", |s| match s {
                 "1" | "true" => Ok(true),

@@ -7,27 +7,15 @@ mod api;
 mod viewer;
 
 use crate::cli::ServeArgs;
-use anyhow::{Context, bail};
+use anyhow::Context;
 use std::sync::{Arc, Mutex};
 use visadapt::io;
 
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
-    args.units.validate()?;
-    args.view.validate()?;
-    if let Some(fov) = args.view.fov
-        && fov >= 180.0
-    {
-        bail!("invalid --fov {fov}: must be below 180 degrees (perspective)");
-    }
     let conditions = args
         .viewing
         .conditions(Some(&args.display), None, Some(&args.view));
     conditions.validate()?;
-    let defaults = viewer::Defaults {
-        display_max_cd_m2: conditions.display_max_cd_m2,
-        fov_deg: args.view.fov,
-        acuity: conditions.acuity,
-    };
 
     let mut image = io::read(&args.input, &args.limits.limits())
         .with_context(|| args.input.display().to_string())?;
@@ -38,6 +26,11 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         image.scale(scale as f32);
     }
     let (width, height) = (image.width, image.height);
+    let defaults = viewer::Defaults {
+        display_max_cd_m2: conditions.display_max_cd_m2,
+        view: args.view.view(width, height),
+        acuity: conditions.acuity,
+    };
     let viewer = viewer::Viewer::new(args.input.clone(), image, scale, conditions, defaults);
     let app = api::router(Arc::new(Mutex::new(viewer)));
 

@@ -52,6 +52,7 @@ pub struct Params {
     /// switch to `peak_cd_m2`.
     pub switch: Option<(f64, f64)>,
     pub display_max_cd_m2: f64,
+    /// A perspective view of this horizontal angle; `None` for the server's default.
     pub fov_deg: Option<f64>,
     pub acuity: bool,
     /// Width of the frame in pixels; `None` for the full resolution.
@@ -63,7 +64,8 @@ pub struct Params {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Defaults {
     pub display_max_cd_m2: f64,
-    pub fov_deg: Option<f64>,
+    /// The view of `--fov` and `--projection`; `None` for the file's.
+    pub view: Option<View>,
     pub acuity: bool,
 }
 
@@ -212,7 +214,8 @@ impl Viewer {
             acuity: p.acuity,
             view: p
                 .fov_deg
-                .map(|fov| View::perspective(fov, self.base.width, self.base.height)),
+                .map(|fov| View::perspective(fov, self.base.width, self.base.height))
+                .or(self.defaults.view),
             ..self.conditions.clone()
         }
     }
