@@ -12,7 +12,10 @@
 //! a high quantile: the smallest luminance that no more than a fraction `f` of the pixels
 //! exceed, with `f` = [`DEFAULT_HOT_PIXEL_FRACTION`] = 0.1 % by default (about 2000 pixels,
 //! a 45 × 45 pixel patch, of a 1920 × 1080 image). Non-finite and negative values count as
-//! zero. The quantile is exact, computed in O(n) with a histogram on the f32 bit pattern
+//! zero. The quantile is exact, computed in O(n). When the fraction leaves at most
+//! [`TOP_K_MAX`] samples above it (the usual case: 2074 at 1080p by default), in one pass
+//! that keeps only the brightest samples seen (a buffer compacted by selection whenever it
+//! fills, whose threshold then rises); otherwise with a histogram on the f32 bit pattern
 //! refined by a second pass inside the one bin that holds it.
 
 /// Default fraction of pixels allowed to be brighter than the "highest visible" luminance.
@@ -64,9 +67,22 @@ pub fn highest_visible_of<const K: usize>(
     // `n - 1 - allowed` in ascending order.
     let allowed = ((n as f64) * fraction).floor() as usize;
     let rank = n - 1 - allowed.min(n - 1);
-    let high = high_histograms::<K>(n, &fill);
+    let keep = n - rank;
+    if keep <= TOP_K_MAX {
+        return top_k::<K>(n, &fill, keep);
+    }
+    by_histogram(n, &fill, rank)
+}
+
+/// The two-pass histogram quantile: the sample of `rank` (ascending) of each channel.
+fn by_histogram<const K: usize>(
+    n: usize,
+    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
+    rank: usize,
+) -> [f32; K] {
+    let high = high_histograms::<K>(n, fill);
     let located: [(u32, usize); K] = std::array::from_fn(|k| locate(&high[k], rank));
-    let low = low_histograms::<K>(n, &fill, located.map(|l| l.0));
+    let low = low_histograms::<K>(n, fill, located.map(|l| l.0));
     std::array::from_fn(|k| {
         let (low_bits, _) = locate(&low[k], located[k].1);
         f32::from_bits((located[k].0 << 16) | low_bits)
@@ -111,6 +127,122 @@ fn block_keys<const K: usize>(block: &[[f32; K]], keys: &mut [[u32; K]]) {
     for (k, v) in keys.iter_mut().zip(block) {
         *k = v.map(order_bits);
     }
+}
+
+/// Largest number of samples kept per channel by the one-pass quantile (3 % of a 1080p
+/// frame); more, and the histogram quantile is used.
+pub const TOP_K_MAX: usize = 1 << 16;
+
+/// The brightest `keep` ordering keys of one channel seen so far (or all, if fewer are
+/// positive), unordered: every key above `floor` is kept, and when the buffer holds
+/// twice `keep` it is cut back to the `keep` largest and `floor` rises to the smallest
+/// of them (no key at or below it can be among the `keep` largest any more).
+struct Brightest {
+    keep: usize,
+    floor: u32,
+    keys: Vec<u32>,
+}
+
+impl Brightest {
+    fn new(keep: usize) -> Self {
+        Brightest {
+            keep,
+            floor: 0,
+            keys: Vec::with_capacity(2 * keep.max(BLOCK)),
+        }
+    }
+
+    #[inline(always)]
+    fn offer(&mut self, key: u32) {
+        if key > self.floor {
+            self.keys.push(key);
+            if self.keys.len() >= 2 * self.keep.max(BLOCK) {
+                self.cut();
+            }
+        }
+    }
+
+    /// Keep the `keep` largest keys; raise `floor` to the smallest of them.
+    fn cut(&mut self) {
+        if self.keys.len() > self.keep {
+            let at = self.keys.len() - self.keep;
+            self.keys.select_nth_unstable(at);
+            self.keys.drain(..at);
+            // Keys equal to the new floor are not needed: `keep` keys ≥ it are held.
+            self.floor = self.floor.max(*self.keys.iter().min().expect("keep ≥ 1"));
+        }
+    }
+
+    fn merge(mut self, other: Brightest) -> Brightest {
+        self.floor = self.floor.max(other.floor);
+        let floor = self.floor;
+        self.keys.retain(|&k| k >= floor);
+        self.keys
+            .extend(other.keys.into_iter().filter(|&k| k >= floor));
+        self.cut();
+        self
+    }
+
+    /// The `keep`-th largest sample (0 if fewer than `keep` are positive).
+    fn answer(mut self) -> f32 {
+        self.cut();
+        if self.keys.len() < self.keep {
+            0.0
+        } else {
+            f32::from_bits(*self.keys.iter().min().expect("keep ≥ 1"))
+        }
+    }
+}
+
+/// The one-pass quantile: the `keep`-th largest sample of each channel.
+fn top_k<const K: usize>(
+    n: usize,
+    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
+    keep: usize,
+) -> [f32; K] {
+    let count = |range: std::ops::Range<usize>, top: &mut [Brightest; K]| {
+        let mut block = [[0.0f32; K]; BLOCK];
+        let mut keys = [[0u32; K]; BLOCK];
+        let mut start = range.start;
+        while start < range.end {
+            let len = BLOCK.min(range.end - start);
+            fill(start, &mut block[..len]);
+            block_keys(&block[..len], &mut keys[..len]);
+            for px in &keys[..len] {
+                for k in 0..K {
+                    top[k].offer(px[k]);
+                }
+            }
+            start += len;
+        }
+    };
+    let chunks = n.div_ceil(CHUNK);
+    let range = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
+    let fresh = || std::array::from_fn::<_, K, _>(|_| Brightest::new(keep));
+    #[cfg(feature = "rayon")]
+    let top = {
+        use rayon::prelude::*;
+        let merge = |a: [Brightest; K], b: [Brightest; K]| {
+            let mut b = b.into_iter();
+            a.map(|a| a.merge(b.next().expect("K channels")))
+        };
+        (0..chunks)
+            .into_par_iter()
+            .fold(fresh, |mut t, c| {
+                count(range(c), &mut t);
+                t
+            })
+            .reduce(fresh, merge)
+    };
+    #[cfg(not(feature = "rayon"))]
+    let top = {
+        let mut t = fresh();
+        for c in 0..chunks {
+            count(range(c), &mut t);
+        }
+        t
+    };
+    top.map(Brightest::answer)
 }
 
 /// Histograms of the high 16 bits of each channel.
@@ -228,6 +360,51 @@ mod tests {
         assert_eq!(highest_visible(&v, 1e-3), 100.0);
         // With no allowance the literal maximum is found.
         assert_eq!(highest_visible(&v, 0.0), 1e7);
+    }
+
+    /// The one-pass quantile and the histogram quantile agree exactly, across chunk
+    /// boundaries (several workers), with ties, zeros, NaNs and negative samples, and
+    /// on an ascending ramp (every sample raises the running floor).
+    #[test]
+    fn one_pass_and_histogram_quantiles_agree() {
+        let n = 2 * CHUNK + 12_345;
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let noisy: Vec<f32> = (0..n)
+            .map(|_| match rnd() % 10 {
+                0 => 0.0,
+                1 => f32::NAN,
+                2 => -3.0,
+                3 => 7.25, // many ties
+                _ => f32::from_bits((rnd() % 0x7f00_0000) as u32),
+            })
+            .collect();
+        let ramp: Vec<f32> = (0..n).map(|i| i as f32 * 0.01).collect();
+        let few: Vec<f32> = (0..n)
+            .map(|i| if i % 50_000 == 3 { 2.0 } else { 0.0 })
+            .collect();
+        for v in [&noisy, &ramp, &few] {
+            let fill = |start: usize, out: &mut [[f32; 1]]| {
+                for (o, x) in out.iter_mut().zip(&v[start..]) {
+                    *o = [*x];
+                }
+            };
+            for fraction in [0.0, 1e-6, 1e-4, 1e-3, 0.01, 0.02] {
+                let allowed = ((n as f64) * fraction).floor() as usize;
+                let rank = n - 1 - allowed;
+                let keep = n - rank;
+                assert!(keep <= TOP_K_MAX);
+                let one = top_k::<1>(n, &fill, keep);
+                let two = by_histogram::<1>(n, &fill, rank);
+                assert_eq!(one[0].to_bits(), two[0].to_bits(), "fraction {fraction}");
+                assert_eq!(highest_visible(v, fraction).to_bits(), two[0].to_bits());
+            }
+        }
     }
 
     #[test]

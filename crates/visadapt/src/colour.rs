@@ -171,9 +171,108 @@ impl SrgbLut {
     }
 }
 
+/// Exact 8-bit sRGB encoding: `round(255·srgb_encode(v))` computed in `f64`, for every
+/// `f32`, without a power function.
+///
+/// The code of `v` is the number of thresholds `t_c = srgb_decode((c − ½)/255)`,
+/// `c = 1..=255`, at or below it. A table indexed by the top 16 bits of `v`'s bit pattern
+/// (exponent and 8 mantissa bits, for `v ≥ 2⁻¹³`; below, every value encodes to 0 as
+/// `t_1 ≈ 1.5e-4`) gives the code at the start of each bucket; a bucket is at most 2⁻⁸
+/// of its value wide, where the curve rises by at most 0.44 codes (at `v = 1`: slope
+/// `255·1.055/2.4`), so one comparison with the next threshold finishes the job.
+/// `srgb8_is_exact_at_every_code` checks both sides of every threshold.
+#[derive(Debug, Clone)]
+pub(crate) struct Srgb8 {
+    /// Code at the start of each bucket, from `2⁻¹³` to `1.0`.
+    base: Vec<u8>,
+    /// `thresholds[c]`: the smallest `f32` encoding to `c` (`[0]` = 0, `[256]` = ∞).
+    thresholds: [f32; 257],
+}
+
+/// Bucket of the smallest `v` the table covers, `2⁻¹³` (its bit pattern >> 15).
+const SRGB8_FIRST_BUCKET: u32 = (127 - 13) << 8;
+
+impl Srgb8 {
+    /// The shared encoder (built once, 3.6 kB).
+    pub(crate) fn get() -> &'static Srgb8 {
+        static ENCODER: std::sync::OnceLock<Srgb8> = std::sync::OnceLock::new();
+        ENCODER.get_or_init(Srgb8::build)
+    }
+
+    fn build() -> Srgb8 {
+        let decode = |e: f64| {
+            if e <= 0.040_45 {
+                e / 12.92
+            } else {
+                ((e + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        let mut thresholds = [f32::INFINITY; 257];
+        thresholds[0] = 0.0;
+        for (c, t) in thresholds.iter_mut().enumerate().take(256).skip(1) {
+            let exact = decode((c as f64 - 0.5) / 255.0);
+            let mut f = exact as f32;
+            if f64::from(f) < exact {
+                f = f.next_up();
+            }
+            *t = f;
+        }
+        let last = 1.0f32.to_bits() >> 15;
+        let base = (SRGB8_FIRST_BUCKET..=last)
+            .map(|b| {
+                let start = f32::from_bits(b << 15);
+                thresholds.iter().skip(1).filter(|&&t| t <= start).count() as u8
+            })
+            .collect();
+        Srgb8 { base, thresholds }
+    }
+
+    /// The code of linear `v` (clamped to `[0, 1]`; NaN → 0).
+    #[inline(always)]
+    pub(crate) fn encode(&self, v: f32) -> u8 {
+        let v = if v > 0.0 { v.min(1.0) } else { 0.0 };
+        let bucket = ((v.to_bits() >> 15).saturating_sub(SRGB8_FIRST_BUCKET)) as usize;
+        let c = self.base[bucket.min(self.base.len() - 1)];
+        c + u8::from(v >= self.thresholds[usize::from(c) + 1])
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every 8-bit code: its threshold encodes to it, the float just below to the code
+    /// before; the exact reference is `round(255·encode(v))` in `f64`.
+    #[test]
+    fn srgb8_is_exact_at_every_code() {
+        let enc = Srgb8::get();
+        let exact = |v: f32| {
+            let v = f64::from(v);
+            let e = if v <= 0.003_130_8 {
+                12.92 * v
+            } else {
+                1.055 * v.powf(1.0 / 2.4) - 0.055
+            };
+            (e * 255.0).round() as u8
+        };
+        for c in 1..=255usize {
+            let t = enc.thresholds[c];
+            assert_eq!(enc.encode(t), c as u8, "threshold of {c}");
+            assert_eq!(exact(t), c as u8, "threshold of {c}");
+            assert_eq!(enc.encode(t.next_down()), c as u8 - 1, "below {c}");
+            assert_eq!(exact(t.next_down()), c as u8 - 1, "below {c}");
+        }
+        // And a dense sweep, the edges and the bad values.
+        for i in 0..=1_000_000 {
+            let v = i as f32 / 1e6;
+            assert_eq!(enc.encode(v), exact(v), "{v}");
+        }
+        for (v, c) in [(0.0, 0), (-1.0, 0), (f32::NAN, 0), (1.0, 255), (7.0, 255)] {
+            assert_eq!(enc.encode(v), c, "{v}");
+        }
+        assert_eq!(enc.encode(f32::INFINITY), 255);
+        assert_eq!(enc.encode(f32::MIN_POSITIVE), 0);
+    }
 
     #[test]
     fn rec709_matrix_matches_iec_61966_2_1() {

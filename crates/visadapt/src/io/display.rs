@@ -3,21 +3,59 @@
 //! discipline every output of the library follows.
 
 use super::output::PendingFile;
-use crate::colour::SrgbLut;
+use crate::colour::{Srgb8, SrgbLut};
 use crate::{DisplayImage, Error, Result};
 use std::io::Write;
 use std::path::Path;
 
-/// Interleaved sRGB-encoded samples of a display image, 8 bits per channel.
+/// Interleaved sRGB-encoded samples of a display image, 8 bits per channel, exactly
+/// rounded (see `colour::Srgb8`), encoded in parallel.
 pub fn to_srgb8(image: &DisplayImage) -> Vec<u8> {
-    let lut = SrgbLut::new(8);
+    let enc = Srgb8::get();
     let mut out = vec![0u8; image.len() * 3];
-    for (i, px) in out.chunks_exact_mut(3).enumerate() {
-        px[0] = lut.encode(image.r[i]) as u8;
-        px[1] = lut.encode(image.g[i]) as u8;
-        px[2] = lut.encode(image.b[i]) as u8;
-    }
+    par_pixels(&mut out, 3, |start, px| {
+        for (i, px) in px.chunks_exact_mut(3).enumerate() {
+            px[0] = enc.encode(image.r[start + i]);
+            px[1] = enc.encode(image.g[start + i]);
+            px[2] = enc.encode(image.b[start + i]);
+        }
+    });
     out
+}
+
+/// Interleaved big-endian sRGB-encoded samples, 16 bits per channel (see [`SrgbLut`]),
+/// encoded in parallel.
+fn to_srgb16_be(image: &DisplayImage) -> Vec<u8> {
+    let lut = SrgbLut::new(16);
+    let mut out = vec![0u8; image.len() * 6];
+    par_pixels(&mut out, 6, |start, px| {
+        for (i, px) in px.chunks_exact_mut(6).enumerate() {
+            let i = start + i;
+            px[0..2].copy_from_slice(&lut.encode(image.r[i]).to_be_bytes());
+            px[2..4].copy_from_slice(&lut.encode(image.g[i]).to_be_bytes());
+            px[4..6].copy_from_slice(&lut.encode(image.b[i]).to_be_bytes());
+        }
+    });
+    out
+}
+
+/// Run `f(first pixel, bytes)` over pieces of `out` (`bytes_per_pixel` per pixel), in
+/// parallel with the `rayon` feature.
+fn par_pixels(out: &mut [u8], bytes_per_pixel: usize, f: impl Fn(usize, &mut [u8]) + Sync) {
+    /// Pixels per work item.
+    const PIXELS: usize = 1 << 14;
+    let chunk = PIXELS * bytes_per_pixel;
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        out.par_chunks_mut(chunk)
+            .enumerate()
+            .for_each(|(i, c)| f(i * PIXELS, c));
+    }
+    #[cfg(not(feature = "rayon"))]
+    for (i, c) in out.chunks_mut(chunk).enumerate() {
+        f(i * PIXELS, c);
+    }
 }
 
 /// Write a PNG with `bits` (8 or 16) per channel, sRGB-encoded.
@@ -34,14 +72,7 @@ pub fn write_png(image: &DisplayImage, bits: u8, w: impl Write) -> Result<()> {
         }
         16 => {
             enc.set_depth(png::BitDepth::Sixteen);
-            let lut = SrgbLut::new(16);
-            let mut out = vec![0u8; image.len() * 6];
-            for (i, px) in out.chunks_exact_mut(6).enumerate() {
-                px[0..2].copy_from_slice(&lut.encode(image.r[i]).to_be_bytes());
-                px[2..4].copy_from_slice(&lut.encode(image.g[i]).to_be_bytes());
-                px[4..6].copy_from_slice(&lut.encode(image.b[i]).to_be_bytes());
-            }
-            out
+            to_srgb16_be(image)
         }
         _ => {
             return Err(Error::invalid(
