@@ -200,48 +200,21 @@ fn top_k<const K: usize>(
     fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
     keep: usize,
 ) -> [f32; K] {
-    let count = |range: std::ops::Range<usize>, top: &mut [Brightest; K]| {
-        let mut block = [[0.0f32; K]; BLOCK];
-        let mut keys = [[0u32; K]; BLOCK];
-        let mut start = range.start;
-        while start < range.end {
-            let len = BLOCK.min(range.end - start);
-            fill(start, &mut block[..len]);
-            block_keys(&block[..len], &mut keys[..len]);
-            for px in &keys[..len] {
+    let top = fold_chunks(
+        n,
+        || std::array::from_fn::<_, K, _>(|_| Brightest::new(keep)),
+        |range, top| {
+            for_each_key(range, fill, |px| {
                 for k in 0..K {
                     top[k].offer(px[k]);
                 }
-            }
-            start += len;
-        }
-    };
-    let chunks = n.div_ceil(CHUNK);
-    let range = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
-    let fresh = || std::array::from_fn::<_, K, _>(|_| Brightest::new(keep));
-    #[cfg(feature = "rayon")]
-    let top = {
-        use rayon::prelude::*;
-        let merge = |a: [Brightest; K], b: [Brightest; K]| {
+            })
+        },
+        |a, b| {
             let mut b = b.into_iter();
             a.map(|a| a.merge(b.next().expect("K channels")))
-        };
-        (0..chunks)
-            .into_par_iter()
-            .fold(fresh, |mut t, c| {
-                count(range(c), &mut t);
-                t
-            })
-            .reduce(fresh, merge)
-    };
-    #[cfg(not(feature = "rayon"))]
-    let top = {
-        let mut t = fresh();
-        for c in 0..chunks {
-            count(range(c), &mut t);
-        }
-        t
-    };
+        },
+    );
     top.map(Brightest::answer)
 }
 
@@ -250,21 +223,12 @@ fn high_histograms<const K: usize>(
     n: usize,
     fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
 ) -> Vec<Vec<u64>> {
-    per_chunk::<K>(n, |range, h| {
-        let mut block = [[0.0f32; K]; BLOCK];
-        let mut keys = [[0u32; K]; BLOCK];
-        let mut start = range.start;
-        while start < range.end {
-            let len = BLOCK.min(range.end - start);
-            fill(start, &mut block[..len]);
-            block_keys(&block[..len], &mut keys[..len]);
-            for px in &keys[..len] {
-                for k in 0..K {
-                    h[k][(px[k] >> 16) as usize] += 1;
-                }
+    histograms::<K>(n, |range, h| {
+        for_each_key(range, fill, |px| {
+            for k in 0..K {
+                h[k][(px[k] >> 16) as usize] += 1;
             }
-            start += len;
-        }
+        })
     })
 }
 
@@ -274,61 +238,86 @@ fn low_histograms<const K: usize>(
     fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
     bins: [u32; K],
 ) -> Vec<Vec<u64>> {
-    per_chunk::<K>(n, |range, h| {
-        let mut block = [[0.0f32; K]; BLOCK];
-        let mut keys = [[0u32; K]; BLOCK];
-        let mut start = range.start;
-        while start < range.end {
-            let len = BLOCK.min(range.end - start);
-            fill(start, &mut block[..len]);
-            block_keys(&block[..len], &mut keys[..len]);
-            for px in &keys[..len] {
-                for k in 0..K {
-                    let b = px[k];
-                    if b >> 16 == bins[k] {
-                        h[k][(b & 0xffff) as usize] += 1;
-                    }
+    histograms::<K>(n, |range, h| {
+        for_each_key(range, fill, |px| {
+            for k in 0..K {
+                let b = px[k];
+                if b >> 16 == bins[k] {
+                    h[k][(b & 0xffff) as usize] += 1;
                 }
             }
-            start += len;
-        }
+        })
     })
 }
 
-/// Run `count` over chunks of `0..n` (in parallel with the `rayon` feature) and sum the
-/// `K` histograms. Each worker counts into one set of histograms for all the chunks it
-/// takes (fresh memory is expensive: a 1080p frame would otherwise touch megabytes of new
-/// pages per pass).
-fn per_chunk<const K: usize>(
+/// Call `f` with the ordering keys of every pixel of `range`, computed block by block.
+#[inline(always)]
+fn for_each_key<const K: usize>(
+    range: std::ops::Range<usize>,
+    fill: &impl Fn(usize, &mut [[f32; K]]),
+    mut f: impl FnMut(&[u32; K]),
+) {
+    let mut block = [[0.0f32; K]; BLOCK];
+    let mut keys = [[0u32; K]; BLOCK];
+    let mut start = range.start;
+    while start < range.end {
+        let len = BLOCK.min(range.end - start);
+        fill(start, &mut block[..len]);
+        block_keys(&block[..len], &mut keys[..len]);
+        keys[..len].iter().for_each(&mut f);
+        start += len;
+    }
+}
+
+/// Run `count` over chunks of `0..n` and sum the `K` histograms. Each worker counts
+/// into one set of histograms for all the chunks it takes (fresh memory is expensive: a
+/// 1080p frame would otherwise touch megabytes of new pages per pass).
+fn histograms<const K: usize>(
     n: usize,
     count: impl Fn(std::ops::Range<usize>, &mut [Vec<u64>]) + Sync,
 ) -> Vec<Vec<u64>> {
+    fold_chunks(
+        n,
+        || vec![vec![0u64; BINS]; K],
+        |range, h: &mut Vec<Vec<u64>>| count(range, h),
+        |mut a, b| {
+            for (a, b) in a.iter_mut().zip(b) {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+            }
+            a
+        },
+    )
+}
+
+/// Fold `count` over chunks of `0..n` into states made by `fresh` (one per worker, in
+/// parallel with the `rayon` feature), then `merge` the states.
+fn fold_chunks<S: Send>(
+    n: usize,
+    fresh: impl Fn() -> S + Sync + Send,
+    count: impl Fn(std::ops::Range<usize>, &mut S) + Sync,
+    merge: impl Fn(S, S) -> S + Sync + Send,
+) -> S {
     let chunks = n.div_ceil(CHUNK);
     let range = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
-    let zero = || vec![vec![0u64; BINS]; K];
     #[cfg(feature = "rayon")]
     {
         use rayon::prelude::*;
         (0..chunks)
             .into_par_iter()
-            .fold(zero, |mut h, c| {
-                count(range(c), &mut h);
-                h
+            .fold(&fresh, |mut s, c| {
+                count(range(c), &mut s);
+                s
             })
-            .reduce(zero, |mut a, b| {
-                for (a, b) in a.iter_mut().zip(b) {
-                    a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-                }
-                a
-            })
+            .reduce(&fresh, merge)
     }
     #[cfg(not(feature = "rayon"))]
     {
-        let mut h = zero();
+        let _ = merge;
+        let mut s = fresh();
         for c in 0..chunks {
-            count(range(c), &mut h);
+            count(range(c), &mut s);
         }
-        h
+        s
     }
 }
 
