@@ -18,6 +18,7 @@
 //! | [`blur`] | a Gaussian blur whose cost does not grow with sigma | Sec. 4.1 |
 //! | [`colour`] | RGB primaries, XYZ, sRGB output | Sec. 4 |
 //! | [`operator`] | the whole steady-state operator, with a report | Sec. 4 |
+//! | [`local`] | local adaptation: adaptation map, per-pixel thresholds, rod saturation and acuity | Sec. 6 (future work), Eq. 3–7 |
 //! | [`timecourse`] | thresholds over time after the light changes; the Eq. 8–9 mapping | Sec. 3.5, 4.2–4.3, Eq. 8–9, Figs. 8–10 |
 //! | [`sequence`] | image sequences of light and dark adaptation, animated PNG | Sec. 5, Fig. 12 |
 //! | [`chart`] | the paper's test scene: ColorChecker, Snellen chart, gratings, spectral | Sec. 5, Fig. 11 |
@@ -41,6 +42,7 @@ mod error;
 mod image;
 pub mod io;
 mod limits;
+pub mod local;
 pub mod mesopic;
 pub mod observer;
 pub mod operator;

@@ -24,12 +24,18 @@
 //! The split into [`plan`] (global quantities, the [`Report`]) and [`apply`] (per-pixel
 //! work with a given [`Mapping`]) lets a caller drive the mapping itself, e.g. from a
 //! time-varying adaptation state.
+//!
+//! With [`AdaptationMode::Local`] the stages are those of [`crate::local`]: an adaptation
+//! map after step 1, and steps 2-5 per pixel at each pixel's own adaptation (the global
+//! level of step 1 anchors the map). The default, [`AdaptationMode::Global`], is the
+//! paper's model.
 
 use crate::acuity::{self, AcuityFilter};
 use crate::adaptation::{
     ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2, DEFAULT_HOT_PIXEL_FRACTION, highest_visible_of,
 };
 use crate::colour::xyz_to_linear_srgb_matrix;
+use crate::local::{self, AdaptationMap, LocalAdaptation, LocalMapping, LocalReport};
 use crate::mesopic::rod_weight;
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
@@ -66,6 +72,18 @@ pub struct ViewingConditions {
     /// The view, overriding the file's; `None` to use the file's or a
     /// [`DEFAULT_FOV_DEG`] perspective view.
     pub view: Option<View>,
+    /// One adaptation level for the scene (the paper's, the default) or one per pixel.
+    pub adaptation: AdaptationMode,
+}
+
+/// Where the world observer's adaptation comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum AdaptationMode {
+    /// One level for the whole scene: half the highest visible luminance (paper Sec. 4.4).
+    #[default]
+    Global,
+    /// Each pixel adapted to its own neighbourhood ([`crate::local`]).
+    Local(LocalAdaptation),
 }
 
 impl Default for ViewingConditions {
@@ -78,6 +96,7 @@ impl Default for ViewingConditions {
             hot_pixel_fraction: DEFAULT_HOT_PIXEL_FRACTION,
             acuity: true,
             view: None,
+            adaptation: AdaptationMode::Global,
         }
     }
 }
@@ -131,6 +150,9 @@ impl ViewingConditions {
                 v.horizontal_deg,
                 "a perspective view spans less than 180 degrees",
             ));
+        }
+        if let AdaptationMode::Local(l) = &self.adaptation {
+            l.validate()?;
         }
         Ok(())
     }
@@ -208,6 +230,9 @@ pub struct Report {
     pub view_source: Source,
     /// Pixels per degree at the image centre; `None` for a view without angles.
     pub pixels_per_degree: Option<f64>,
+    /// With local adaptation, the spread of the adaptation map (set by [`map`]; `None`
+    /// from [`plan`], which computes the global quantities only).
+    pub local: Option<LocalReport>,
 }
 
 impl Report {
@@ -257,13 +282,39 @@ pub struct Output {
 /// # Ok::<(), visadapt::Error>(())
 /// ```
 pub fn map(image: &HdrImage, conditions: &ViewingConditions) -> Result<Output> {
-    let report = plan(image, conditions)?;
-    let (display, stats) = apply(image, &report.mapping);
+    let mut report = plan(image, conditions)?;
+    let (display, stats) = match conditions.adaptation {
+        AdaptationMode::Global => apply(image, &report.mapping),
+        AdaptationMode::Local(options) => {
+            let map = local_map(image, &report, conditions, &options)?;
+            let mapping = LocalMapping::steady_state(&map, &report, options.rod_saturation);
+            let mut out = DisplayImage::default();
+            let stats = local::apply_into(image, &map, &mapping, &mut out);
+            report.local = Some(LocalReport::of(&map, options.rod_saturation));
+            (out, stats)
+        }
+    };
     Ok(Output {
         image: display,
         report,
         stats,
     })
+}
+
+/// The adaptation map of `image` for local adaptation `options`, anchored to its [`plan`]
+/// `report` under `conditions`.
+pub fn local_map(
+    image: &HdrImage,
+    report: &Report,
+    conditions: &ViewingConditions,
+    options: &LocalAdaptation,
+) -> Result<AdaptationMap> {
+    AdaptationMap::compute(
+        image,
+        report,
+        options.radius_deg,
+        conditions.hot_pixel_fraction,
+    )
 }
 
 /// Compute the global quantities of the model for an image: adaptation levels, scale
@@ -363,6 +414,7 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
         view,
         view_source,
         pixels_per_degree: ppd,
+        local: None,
     })
 }
 
@@ -448,7 +500,7 @@ pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -
 /// Samples per parallel work item.
 const CHUNK: usize = 1 << 15;
 
-fn par_chunks(
+pub(crate) fn par_chunks(
     r: &mut [f32],
     g: &mut [f32],
     b: &mut [f32],
@@ -529,7 +581,7 @@ fn map_chunk(
 /// read as 0. Returns (all finite, any negative, cleaned channels). Written with
 /// non-short-circuit operators and selects so that loops over it vectorise.
 #[inline(always)]
-fn sanitize(v: [f32; 4]) -> (bool, bool, [f32; 4]) {
+pub(crate) fn sanitize(v: [f32; 4]) -> (bool, bool, [f32; 4]) {
     let finite = v[0].is_finite() & v[1].is_finite() & v[2].is_finite() & v[3].is_finite();
     let negative = finite & ((v[0] < 0.0) | (v[1] < 0.0) | (v[2] < 0.0) | (v[3] < 0.0));
     (
@@ -554,7 +606,7 @@ impl Coefficients {
 }
 
 #[inline(always)]
-fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelStats {
+pub(crate) fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelStats {
     let mut clipped = 0u32;
     for ((r, g), b) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
         let (rr, gg, bb) = (r.max(0.0), g.max(0.0), b.max(0.0));

@@ -1,0 +1,662 @@
+//! The adaptation map: per pixel, the photopic and scotopic luminance the eye is adapted to
+//! when it looks there.
+//!
+//! # What it models
+//!
+//! The paper's observer adapts to one level for the whole scene (Sec. 4.4: half the highest
+//! visible luminance); its future work says "the retina adapts locally" (Sec. 6). Looking
+//! at a point, the eye is adapted to the light of the fovea and its surround, about a
+//! degree around the point of regard (Ward Larson, Rushmeier & Piatko 1997 and Radiance's
+//! `pcond` use 1° foveal samples). The map below is that foveal level for every pixel.
+//!
+//! # The neighbourhood: an edge-aware low-pass in degrees
+//!
+//! A plain low-pass of a scene with a bright region next to a dark one raises the adaptation
+//! of the dark pixels near the edge, which the display then shows too dark: the *halo* that
+//! is the known failure of local operators (Pattanaik et al. 1998, Reinhard et al. 2002,
+//! Durand & Dorsey 2002, Ledda et al. 2004). Here the low-pass is the recursive-filter form
+//! of the *domain transform* of Gastal & Oliveira (2011, "Domain transform for edge-aware
+//! image and video processing", SIGGRAPH, Eq. 11 and Sec. 4.2): a signal is smoothed with
+//! an exponential kernel along a curve whose length counts both distance and change, so
+//! that pixels across a strong edge are far apart and do not mix. Our distance between
+//! neighbouring samples `p` and `q` is
+//!
+//! `d(p, q) = θ(p, q) + D·|g(p) − g(q)|` degrees,
+//!
+//! with `θ` their angular separation (from the view: perspective and fisheye projections
+//! alike, see [`pixel_size_deg`]), `g` the log10 photopic luminance (the guide) and
+//! `D` = [`EDGE_DEGREES_PER_LOG_UNIT`]: an edge of one log unit separates as much as `D`
+//! degrees of uniform field. The filter is the domain transform's: for each of
+//! [`ITERATIONS`] iterations `i` a causal and an anti-causal pass along every row, then
+//! along every column, `J[n] = J[n−1] + (1 − a_i^d)(I[n] − J[n−1])` with
+//! `a_i = exp(−√2/σ_i)` and `σ_i = σ·√3·2^(N−i)/√(4^N − 1)`, so that the kernel along a
+//! uniform line has standard deviation `σ`, the **radius** of the neighbourhood in degrees.
+//!
+//! Unlike Gastal & Oliveira, who scale the edge term with the radius (`σ_s/σ_r`), the edge
+//! term here is a fixed angle per log unit. So a wide neighbourhood sees through edges
+//! and, as the radius grows without bound, the map becomes constant: the global model is the
+//! limit of the local one (tested).
+//!
+//! The filtered signals are the log10 photopic and scotopic luminances (the log mean over
+//! the foveal samples, as Ward Larson et al. 1997 and `pcond` take it); zero, negative and
+//! non-finite pixels read as [`FLOOR_CD_M2`], far below every threshold of Eq. 4-5.
+//!
+//! # Anchored to the paper's level
+//!
+//! The map gives offsets from the global state rather than levels of its own: with `μ(x)`
+//! the filtered log luminance and `μ_H` its high quantile (the same fraction of pixels as
+//! the Sec. 4.4 "highest visible" rule), the local adaptation is
+//!
+//! `L_a(x) = L_wa · 10^(μ(x) − μ_H)`,
+//!
+//! and likewise for the rods with their own channel. The brightest neighbourhoods are adapted
+//! as the paper's observer (half the highest visible luminance), every other neighbourhood
+//! that many log units lower as it is darker. A uniform image, and any image in the limit of
+//! an infinite radius, give offsets of exactly 0: the global model, pixels included. The
+//! offsets are also what the time course needs (a global state plus local offsets, see
+//! [`crate::local`]).
+//!
+//! # Cost
+//!
+//! The filter runs on a grid of samples [`grid step`](AdaptationMap::grid_step_px) pixels
+//! apart (block means of the log luminance), at least [`SAMPLES_PER_RADIUS`] samples per
+//! radius; the full-resolution map is a joint bilateral upsampling (Kopf, Cohen, Lischinski
+//! & Uyttendaele 2007) of the grid, each pixel weighting the four grid samples around it by
+//! distance and by how close their guide is to its own log luminance, so that the map
+//! keeps edges sharp at full resolution. The cost is linear in the pixels and flat in the
+//! radius.
+
+use crate::acuity::AcuityFilter;
+use crate::image::{Projection, View};
+use crate::operator::{DEFAULT_FOV_DEG, MIN_BLUR_SIGMA_PX, Report};
+use crate::scotopic;
+use crate::{Error, HdrImage, Result};
+
+/// An edge of one log10 unit separates samples as much as this many degrees of uniform
+/// field (the `D` of the module docs). A project choice: with it a 1000:1 edge is 6° away,
+/// six radii of the default neighbourhood, which keeps the bright side's weight on the dark
+/// side's adaptation under 1e-3 (the halo test), while the gradual changes of a sky or a
+/// lit wall (a log unit over tens of degrees) barely shorten the neighbourhood.
+pub const EDGE_DEGREES_PER_LOG_UNIT: f64 = 2.0;
+
+/// Iterations of the domain transform's recursive filter (Gastal & Oliveira 2011 use 3).
+pub const ITERATIONS: usize = 3;
+
+/// Luminance that zero, negative and non-finite pixels read as in the map, cd/m² (and
+/// scotopic cd/m²): four log units below the rods' absolute threshold (Eq. 5 is flat below
+/// 10^-3.94), so it changes no threshold.
+pub const FLOOR_CD_M2: f32 = 1e-8;
+
+/// The filter grid has at least this many samples per radius.
+pub const SAMPLES_PER_RADIUS: f64 = 4.0;
+
+/// The largest grid step, pixels.
+pub const MAX_GRID_STEP_PX: usize = 32;
+
+/// Width, log10 units, of the range weight of the upsampling: a grid sample whose guide
+/// differs from the pixel's log luminance by this much weighs a quarter of one that
+/// matches. Texture within about half a log unit is smoothed; edges are kept.
+pub const UPSAMPLING_RANGE_LOG: f32 = 0.5;
+
+/// Per pixel, the local adaptation as log10 offsets from the global world adaptation of an
+/// [`operator::plan`](crate::operator::plan) report (see the module docs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdaptationMap {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Per pixel, `log10(L_a(x) / L_wa)` for the cones (photopic).
+    pub offset_log: Vec<f32>,
+    /// Per pixel, `log10(L_a,s(x) / L_wa,s)` for the rods (scotopic).
+    pub offset_scotopic_log: Vec<f32>,
+    /// Per pixel, the standard deviation of the Eq. 7 acuity Gaussian at the local
+    /// adaptation, pixels (0: no blur); `None` when the report's acuity was off or its view
+    /// has no angles.
+    pub acuity_sigma_px: Option<Vec<f32>>,
+    /// The global photopic world adaptation `L_wa` the offsets are from, cd/m².
+    pub world_adaptation_cd_m2: f64,
+    /// The global scotopic world adaptation the scotopic offsets are from, scotopic cd/m².
+    pub world_adaptation_scotopic_cd_m2: f64,
+    /// The radius of the neighbourhood, degrees.
+    pub radius_deg: f64,
+    /// Pixels between the samples of the filter grid.
+    pub grid_step_px: usize,
+    /// The filter grid itself, for the stages that want values per sample.
+    pub grid: Grid,
+}
+
+/// The filter grid: samples `step` pixels apart, row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid {
+    /// Samples per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Per sample, the guide (block mean of log10 photopic luminance).
+    pub guide_log: Vec<f32>,
+    /// Per sample, the photopic offset (log10, as [`AdaptationMap::offset_log`]).
+    pub offset_log: Vec<f32>,
+    /// Per sample, the scotopic offset.
+    pub offset_scotopic_log: Vec<f32>,
+    /// Per sample, pixels per degree there (from the view).
+    pub pixels_per_degree: Vec<f32>,
+}
+
+impl AdaptationMap {
+    /// The local photopic adaptation of pixel `i`, cd/m².
+    pub fn adaptation_cd_m2(&self, i: usize) -> f64 {
+        self.world_adaptation_cd_m2 * 10f64.powf(f64::from(self.offset_log[i]))
+    }
+
+    /// The local scotopic adaptation of pixel `i`, scotopic cd/m².
+    pub fn adaptation_scotopic_cd_m2(&self, i: usize) -> f64 {
+        self.world_adaptation_scotopic_cd_m2 * 10f64.powf(f64::from(self.offset_scotopic_log[i]))
+    }
+
+    /// The map of `image` for a neighbourhood of `radius_deg` degrees (positive; `+∞` for
+    /// the global limit), anchored to the world adaptation of `report` (the
+    /// [`operator::plan`](crate::operator::plan) of the same image) with its hot-pixel
+    /// fraction `hot_pixel_fraction`.
+    pub fn compute(
+        image: &HdrImage,
+        report: &Report,
+        radius_deg: f64,
+        hot_pixel_fraction: f64,
+    ) -> Result<Self> {
+        image.check_consistent()?;
+        if !(radius_deg > 0.0) {
+            return Err(Error::invalid(
+                "adaptation-radius",
+                radius_deg,
+                "must be a positive number of degrees",
+            ));
+        }
+        let (w, h) = (image.width, image.height);
+        let view = angular_view(&report.view, w, h);
+        let centre_ppd = 1.0 / pixel_size_deg(&view, w, h, w as f64 / 2.0, h as f64 / 2.0);
+        let step = grid_step(radius_deg * centre_ppd);
+        let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
+
+        // Block means of the log luminances (the guide is the photopic one).
+        let (guide, scot) = block_log_means(image, step, gw, gh);
+        let mut ppd = vec![0f32; gw * gh];
+        for gy in 0..gh {
+            for gx in 0..gw {
+                let cx =
+                    ((gx * step) as f64 + (step.min(w - gx * step)) as f64 / 2.0).min(w as f64);
+                let cy =
+                    ((gy * step) as f64 + (step.min(h - gy * step)) as f64 / 2.0).min(h as f64);
+                ppd[gy * gw + gx] = (1.0 / pixel_size_deg(&view, w, h, cx, cy)) as f32;
+            }
+        }
+        let mut phot: Vec<f64> = guide.iter().map(|&v| f64::from(v)).collect();
+        let mut scot: Vec<f64> = scot.iter().map(|&v| f64::from(v)).collect();
+        let guide64: Vec<f64> = phot.clone();
+        let step_deg: Vec<f64> = ppd.iter().map(|&p| step as f64 / f64::from(p)).collect();
+        domain_transform(
+            &mut [&mut phot, &mut scot],
+            &guide64,
+            &step_deg,
+            gw,
+            gh,
+            radius_deg,
+        );
+        let anchor = |v: &[f64]| high_quantile(v, hot_pixel_fraction);
+        let (qp, qs) = (anchor(&phot), anchor(&scot));
+        let offset_grid: Vec<f32> = phot.iter().map(|&v| (v - qp) as f32).collect();
+        let offset_scotopic_grid: Vec<f32> = scot.iter().map(|&v| (v - qs) as f32).collect();
+        // The acuity Gaussian of each sample's adaptation (Eq. 7), in pixels by the same rule
+        // as the global operator (pixels per degree at the centre, capped at the image size).
+        let sigma_grid: Option<Vec<f32>> = match (report.acuity_applied, report.pixels_per_degree) {
+            (true, Some(ppd)) => {
+                let (lwa, lwa_s) = (
+                    report.world_adaptation_cd_m2,
+                    report.world_adaptation_scotopic_cd_m2,
+                );
+                Some(
+                    offset_grid
+                        .iter()
+                        .zip(&offset_scotopic_grid)
+                        .map(|(&dp, &ds)| {
+                            let la = lwa * 10f64.powf(f64::from(dp));
+                            let las = lwa_s * 10f64.powf(f64::from(ds));
+                            let s =
+                                (AcuityFilter::new(la, las).sigma_deg * ppd).min(w.max(h) as f64);
+                            if s >= MIN_BLUR_SIGMA_PX {
+                                s as f32
+                            } else {
+                                0.0
+                            }
+                        })
+                        .collect(),
+                )
+            }
+            _ => None,
+        };
+        let grid = Grid {
+            width: gw,
+            height: gh,
+            guide_log: guide,
+            offset_log: offset_grid,
+            offset_scotopic_log: offset_scotopic_grid,
+            pixels_per_degree: ppd,
+        };
+        let mut channels: Vec<&[f32]> = vec![&grid.offset_log, &grid.offset_scotopic_log];
+        if let Some(s) = &sigma_grid {
+            channels.push(s);
+        }
+        let mut planes = upsample(image, &grid, step, &channels).into_iter();
+        let offset_log = planes.next().expect("photopic plane");
+        let offset_scotopic_log = planes.next().expect("scotopic plane");
+        let acuity_sigma_px = planes.next();
+        Ok(AdaptationMap {
+            width: w,
+            height: h,
+            offset_log,
+            offset_scotopic_log,
+            acuity_sigma_px,
+            world_adaptation_cd_m2: report.world_adaptation_cd_m2,
+            world_adaptation_scotopic_cd_m2: report.world_adaptation_scotopic_cd_m2,
+            radius_deg,
+            grid_step_px: step,
+            grid,
+        })
+    }
+}
+
+/// The grid step for a radius of `radius_px` pixels.
+fn grid_step(radius_px: f64) -> usize {
+    let s = (radius_px / SAMPLES_PER_RADIUS).floor();
+    if s.is_nan() || s < 1.0 {
+        1
+    } else {
+        (s as usize).min(MAX_GRID_STEP_PX)
+    }
+}
+
+/// The view with angles: the image's, or for a view without angles (parallel) the default
+/// perspective one.
+fn angular_view(view: &View, w: usize, h: usize) -> View {
+    if view.pixels_per_degree(w).is_some() {
+        *view
+    } else {
+        View::perspective(DEFAULT_FOV_DEG, w, h)
+    }
+}
+
+/// The direction (unit vector) seen at image position `(u, v)` (pixels from the top-left
+/// corner, continuous) of a `w × h` image in `view`; positions outside a fisheye's circle
+/// are taken on its rim.
+fn direction(view: &View, w: usize, h: usize, u: f64, v: f64) -> [f64; 3] {
+    let (half_w, half_h) = (w as f64 / 2.0, h as f64 / 2.0);
+    let (dx, dy) = (u - half_w, v - half_h);
+    let half_fov = (view.horizontal_deg / 2.0).to_radians();
+    let normalise = |a: [f64; 3]| {
+        let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        [a[0] / n, a[1] / n, a[2] / n]
+    };
+    let polar = |theta: f64| {
+        let r = (dx * dx + dy * dy).sqrt();
+        if r == 0.0 {
+            return [0.0, 0.0, 1.0];
+        }
+        let (s, c) = theta.sin_cos();
+        [s * dx / r, s * dy / r, c]
+    };
+    let r_rel = || ((dx * dx + dy * dy).sqrt() / half_w).min(1.0);
+    match view.projection {
+        Projection::Perspective | Projection::Parallel => {
+            let t = half_fov.tan() / half_w;
+            normalise([dx * t, dy * t, 1.0])
+        }
+        Projection::AngularFisheye => polar(r_rel() * half_fov),
+        Projection::HemisphericalFisheye => {
+            polar((r_rel() * half_fov.sin()).clamp(-1.0, 1.0).asin())
+        }
+        Projection::Planisphere => polar(2.0 * (r_rel() * (half_fov / 2.0).tan()).atan()),
+        Projection::Cylindrical => {
+            let phi = dx / half_w * half_fov;
+            let vt = (view.vertical_deg / 2.0).to_radians().tan() / half_h;
+            normalise([phi.sin(), dy * vt, phi.cos()])
+        }
+    }
+}
+
+/// The angular size of a pixel at image position `(u, v)`, degrees: the square root of its
+/// solid angle (as `pcond` takes it), from the view's projection: the area spanned by the
+/// direction changes across the pixel horizontally and vertically. Perspective, angular
+/// and hemispherical fisheye, planisphere and cylindrical views; a view without angles
+/// (parallel) is read as perspective. On a fisheye's rim, where the projection folds, the
+/// larger of the two extents stands for both.
+pub fn pixel_size_deg(view: &View, w: usize, h: usize, u: f64, v: f64) -> f64 {
+    let d = |du: f64, dv: f64| direction(view, w, h, u + du, v + dv);
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let norm = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let a = sub(d(0.5, 0.0), d(-0.5, 0.0));
+    let b = sub(d(0.0, 0.5), d(0.0, -0.5));
+    let cross = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
+    let area = norm(cross);
+    let longest = norm(a).max(norm(b));
+    let size = if area > 1e-6 * longest * longest {
+        area.sqrt()
+    } else if longest > 0.0 {
+        longest
+    } else {
+        (view.horizontal_deg / w as f64).to_radians()
+    };
+    size.to_degrees()
+}
+
+/// log10 of a positive, finite, normal `f32`, to about 2e-6 (a bit split and a short
+/// series in `t = (m − 1)/(m + 1)`), in a form the compiler vectorises.
+#[inline(always)]
+pub(crate) fn fast_log10(x: f32) -> f32 {
+    const LOG10_2: f32 = std::f32::consts::LOG10_2;
+    let bits = x.to_bits();
+    let exponent = ((bits >> 23) & 0xff) as i32 - 127;
+    let mut m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000); // [1, 2)
+    let mut e = exponent as f32;
+    // Centre the mantissa on 1 ([0.707, 1.414)) so the series converges fast.
+    if m > std::f32::consts::SQRT_2 {
+        m *= 0.5;
+        e += 1.0;
+    }
+    let t = (m - 1.0) / (m + 1.0);
+    let t2 = t * t;
+    // ln m = 2(t + t³/3 + t⁵/5 + t⁷/7), |t| < 0.172: the next term is below 1e-8.
+    let ln_m = 2.0 * t * (1.0 + t2 * (1.0 / 3.0 + t2 * (1.0 / 5.0 + t2 * (1.0 / 7.0))));
+    e * LOG10_2 + ln_m * std::f32::consts::LOG10_E
+}
+
+/// The map's reading of a luminance: non-finite, zero and negative values, and values below
+/// [`FLOOR_CD_M2`], read as the floor.
+#[inline(always)]
+fn clean(v: f32, finite: bool) -> f32 {
+    if finite && v > FLOOR_CD_M2 {
+        v
+    } else {
+        FLOOR_CD_M2
+    }
+}
+
+/// Per pixel the log10 photopic and scotopic luminance as the map reads them, for pixels
+/// `start..start + out.len()`.
+fn log_luminances(image: &HdrImage, start: usize, out_p: &mut [f32], out_s: &mut [f32]) {
+    let end = start + out_p.len();
+    for (j, i) in (start..end).enumerate() {
+        let (x, y, z) = (image.x[i], image.y[i], image.z[i]);
+        let s = image.scotopic.as_ref().map_or(0.0, |s| s[i]);
+        let finite = x.is_finite() & y.is_finite() & z.is_finite() & s.is_finite();
+        let v = match &image.scotopic {
+            Some(_) => s,
+            None if finite => scotopic::from_xyz(x.max(0.0), y.max(0.0), z.max(0.0)),
+            None => 0.0,
+        };
+        out_p[j] = fast_log10(clean(y, finite));
+        out_s[j] = fast_log10(clean(v, finite));
+    }
+}
+
+/// Block means (`step × step` pixels, smaller at the right and bottom edges) of the log
+/// luminances. A mean of equal values is that value exactly (it is summed as differences
+/// from the block's first pixel).
+fn block_log_means(image: &HdrImage, step: usize, gw: usize, gh: usize) -> (Vec<f32>, Vec<f32>) {
+    let (w, h) = (image.width, image.height);
+    let mut guide = vec![0f32; gw * gh];
+    let mut scot = vec![0f32; gw * gh];
+    let band = |gy: usize, guide: &mut [f32], scot: &mut [f32]| {
+        let mut row_p = vec![0f32; w];
+        let mut row_s = vec![0f32; w];
+        let mut sum_p = vec![0f64; gw];
+        let mut sum_s = vec![0f64; gw];
+        let mut first_p = vec![0f32; gw];
+        let mut first_s = vec![0f32; gw];
+        let rows = (gy * step)..((gy + 1) * step).min(h);
+        let count_y = rows.len();
+        for (k, y) in rows.enumerate() {
+            log_luminances(image, y * w, &mut row_p, &mut row_s);
+            for gx in 0..gw {
+                let cols = (gx * step)..((gx + 1) * step).min(w);
+                if k == 0 {
+                    first_p[gx] = row_p[cols.start];
+                    first_s[gx] = row_s[cols.start];
+                }
+                let (fp, fs) = (first_p[gx], first_s[gx]);
+                for x in cols {
+                    sum_p[gx] += f64::from(row_p[x] - fp);
+                    sum_s[gx] += f64::from(row_s[x] - fs);
+                }
+            }
+        }
+        for gx in 0..gw {
+            let count = (count_y * (((gx + 1) * step).min(w) - gx * step)) as f64;
+            guide[gx] = first_p[gx] + (sum_p[gx] / count) as f32;
+            scot[gx] = first_s[gx] + (sum_s[gx] / count) as f32;
+        }
+    };
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        guide
+            .par_chunks_mut(gw)
+            .zip(scot.par_chunks_mut(gw))
+            .enumerate()
+            .for_each(|(gy, (g, s))| band(gy, g, s));
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        for (gy, (g, s)) in guide.chunks_mut(gw).zip(scot.chunks_mut(gw)).enumerate() {
+            band(gy, g, s);
+        }
+    }
+    (guide, scot)
+}
+
+/// The domain transform's recursive filter (module docs) of `channels` in place, on a
+/// `gw × gh` grid whose samples are `step_deg` degrees wide, edges from `guide`.
+fn domain_transform(
+    channels: &mut [&mut Vec<f64>],
+    guide: &[f64],
+    step_deg: &[f64],
+    gw: usize,
+    gh: usize,
+    sigma_deg: f64,
+) {
+    // Link lengths in degrees: `dh[i]` from sample i−1 to i along the row, `dv[i]` from
+    // the sample above.
+    let n = gw * gh;
+    let mut dh = vec![0f64; n];
+    let mut dv = vec![0f64; n];
+    for y in 0..gh {
+        for x in 0..gw {
+            let i = y * gw + x;
+            if x > 0 {
+                dh[i] = 0.5 * (step_deg[i] + step_deg[i - 1])
+                    + EDGE_DEGREES_PER_LOG_UNIT * (guide[i] - guide[i - 1]).abs();
+            }
+            if y > 0 {
+                dv[i] = 0.5 * (step_deg[i] + step_deg[i - gw])
+                    + EDGE_DEGREES_PER_LOG_UNIT * (guide[i] - guide[i - gw]).abs();
+            }
+        }
+    }
+    let iterations = ITERATIONS as i32;
+    let norm = 3f64.sqrt() / (4f64.powi(iterations) - 1.0).sqrt();
+    let mut wh = vec![0f64; n];
+    let mut wv = vec![0f64; n];
+    for i in 0..iterations {
+        let sigma_i = sigma_deg * norm * 2f64.powi(iterations - 1 - i);
+        // Weight of the previous sample, `a^d`; 1 (a constant signal) for an infinite sigma.
+        let weight = |d: f64| (-std::f64::consts::SQRT_2 * d / sigma_i).exp();
+        for (w, d) in wh.iter_mut().zip(&dh) {
+            *w = weight(*d);
+        }
+        for (w, d) in wv.iter_mut().zip(&dv) {
+            *w = weight(*d);
+        }
+        for c in channels.iter_mut() {
+            // Rows.
+            for y in 0..gh {
+                let row = &mut c[y * gw..(y + 1) * gw];
+                let wr = &wh[y * gw..(y + 1) * gw];
+                for x in 1..gw {
+                    row[x] = row[x - 1] + (1.0 - wr[x]) * (row[x] - row[x - 1]);
+                }
+                for x in (0..gw.saturating_sub(1)).rev() {
+                    row[x] = row[x + 1] + (1.0 - wr[x + 1]) * (row[x] - row[x + 1]);
+                }
+            }
+            // Columns.
+            for y in 1..gh {
+                for x in 0..gw {
+                    let i = y * gw + x;
+                    c[i] = c[i - gw] + (1.0 - wv[i]) * (c[i] - c[i - gw]);
+                }
+            }
+            for y in (0..gh.saturating_sub(1)).rev() {
+                for x in 0..gw {
+                    let i = y * gw + x;
+                    c[i] = c[i + gw] + (1.0 - wv[i + gw]) * (c[i] - c[i + gw]);
+                }
+            }
+        }
+    }
+}
+
+/// The value that at most `fraction` of `values` exceed (the rank rule of
+/// [`crate::adaptation::highest_visible`]).
+pub(crate) fn high_quantile(values: &[f64], fraction: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    let allowed = ((n as f64) * fraction.clamp(0.0, 1.0)).floor() as usize;
+    v[n - 1 - allowed.min(n - 1)]
+}
+
+/// Joint bilateral upsampling of grid `channels` to every pixel (module docs).
+fn upsample(image: &HdrImage, grid: &Grid, step: usize, channels: &[&[f32]]) -> Vec<Vec<f32>> {
+    let (w, h) = (image.width, image.height);
+    let n = w * h;
+    let k = channels.len();
+    let (gw, gh) = (grid.width, grid.height);
+    let inv_range = 1.0 / UPSAMPLING_RANGE_LOG;
+    // Interleaved output, one row of `w·k` values per image row.
+    let mut out = vec![0f32; n * k];
+    let row_fn = |y: usize, row: &mut [f32]| {
+        let mut lp = vec![0f32; w];
+        let mut ls = vec![0f32; w];
+        log_luminances(image, y * w, &mut lp, &mut ls);
+        // Grid coordinates of the pixel centre: sample k's centre is at (k + 1/2)·step.
+        let fy = ((y as f32 + 0.5) / step as f32 - 0.5).clamp(0.0, (gh - 1) as f32);
+        let y0 = (fy as usize).min(gh - 1);
+        let y1 = (y0 + 1).min(gh - 1);
+        let ty = fy - y0 as f32;
+        for (x, px) in row.chunks_exact_mut(k).enumerate() {
+            let fx = ((x as f32 + 0.5) / step as f32 - 0.5).clamp(0.0, (gw - 1) as f32);
+            let x0 = (fx as usize).min(gw - 1);
+            let x1 = (x0 + 1).min(gw - 1);
+            let tx = fx - x0 as f32;
+            let taps = [
+                (y0 * gw + x0, (1.0 - tx) * (1.0 - ty)),
+                (y0 * gw + x1, tx * (1.0 - ty)),
+                (y1 * gw + x0, (1.0 - tx) * ty),
+                (y1 * gw + x1, tx * ty),
+            ];
+            let g = lp[x];
+            let base = taps[0].0;
+            let mut weights = [0f32; 4];
+            let mut sw = 0f32;
+            for (wq, (q, b)) in weights.iter_mut().zip(taps) {
+                let r = (g - grid.guide_log[q]) * inv_range;
+                let range = 1.0 / (1.0 + r * r);
+                *wq = b * range * range;
+                sw += *wq;
+            }
+            for (o, c) in px.iter_mut().zip(channels) {
+                let b = c[base];
+                let mut s = 0f32;
+                for (wq, (q, _)) in weights.iter().zip(taps) {
+                    s += wq * (c[q] - b);
+                }
+                // A sum of differences from the first tap: equal taps give it exactly.
+                *o = b + s / sw;
+            }
+        }
+    };
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        out.par_chunks_mut(w * k)
+            .enumerate()
+            .for_each(|(y, row)| row_fn(y, row));
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        for (y, row) in out.chunks_mut(w * k).enumerate() {
+            row_fn(y, row);
+        }
+    }
+    // De-interleave.
+    (0..k)
+        .map(|c| out.iter().skip(c).step_by(k).copied().collect())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fast_log10_is_accurate() {
+        let mut worst = 0f64;
+        let mut v = 1e-8f32;
+        while v < 1e8 {
+            let err = (f64::from(fast_log10(v)) - f64::from(v).log10()).abs();
+            worst = worst.max(err);
+            v *= 1.0137;
+        }
+        assert!(worst < 3e-6, "{worst}");
+        assert_eq!(fast_log10(1.0), 0.0);
+    }
+
+    #[test]
+    fn pixel_sizes_follow_the_projection() {
+        // Perspective 90°: at the centre (W/2)/tan(45°)·π/180 pixels per degree.
+        let v = View::perspective(90.0, 1000, 1000);
+        let centre = pixel_size_deg(&v, 1000, 1000, 500.0, 500.0);
+        let want = 1.0 / (500.0 * std::f64::consts::PI / 180.0);
+        assert!((centre / want - 1.0).abs() < 1e-6, "{centre} {want}");
+        // At the corner of a perspective view pixels subtend less (cos² θ radially, cos θ
+        // tangentially, θ = atan(√2)).
+        let corner = pixel_size_deg(&v, 1000, 1000, 0.5, 0.5);
+        let c = (1.0 / 3f64.sqrt()).acos().cos();
+        assert!(
+            (corner / centre - c.powf(1.5)).abs() < 2e-3,
+            "{}",
+            corner / centre
+        );
+        // Angular fisheye 180°: radially uniform (fov / W), tangentially sin θ / θ.
+        let f = View {
+            projection: Projection::AngularFisheye,
+            horizontal_deg: 180.0,
+            vertical_deg: 180.0,
+        };
+        let c = pixel_size_deg(&f, 1000, 1000, 500.0, 500.0);
+        assert!((c - 0.18).abs() < 1e-6, "{c}");
+        let at60 = pixel_size_deg(&f, 1000, 1000, 500.0 + 1000.0 / 3.0, 500.0);
+        let theta = 60f64.to_radians();
+        assert!((at60 / (0.18 * (theta.sin() / theta).sqrt()) - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn grid_steps() {
+        assert_eq!(grid_step(2.0), 1);
+        assert_eq!(grid_step(32.0), 8);
+        assert_eq!(grid_step(f64::INFINITY), MAX_GRID_STEP_PX);
+    }
+}

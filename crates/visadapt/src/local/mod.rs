@@ -1,0 +1,461 @@
+//! Local adaptation: every pixel seen by an eye adapted to its own neighbourhood.
+//!
+//! The paper's observer adapts to one level for the whole scene (Sec. 4.4); its future work
+//! says "the retina adapts locally" (Sec. 6). With one level, in daylight everything below
+//! about 1 % of the adaptation level is shown black although an observer looking there
+//! would see it, and at night a small coloured light is weighted by the rods of the dark
+//! street around it (`k ≈ 1`) and turns white. With
+//! [`AdaptationMode::Local`](crate::operator::AdaptationMode::Local) the operator's stages
+//! become:
+//!
+//! 1. **adaptation map** ([`map`]): per pixel the photopic and scotopic luminance the eye is
+//!    adapted to when it looks there, an edge-aware low-pass over a neighbourhood of
+//!    [`LocalAdaptation::radius_deg`] degrees, anchored so that the brightest neighbourhoods
+//!    keep the paper's level (half the highest visible luminance);
+//! 2. **thresholds and scales per pixel** ([`LocalMapping`]): Eq. 3 (`m_p`, `m_s`), Eq. 4-5
+//!    (the thresholds inside them), Eq. 6 (`k`) and Eq. 7 (the acuity cutoff and its
+//!    Gaussian) at each pixel's own adaptation; with **rod saturation**
+//!    ([`ROD_SATURATION_SCOTOPIC_CD_M2`]);
+//! 3. **mapping**: `m_p(x)·XYZ + k(x)·m_s(x)·V·white` per pixel (Eq. 6), as the global
+//!    operator with per-pixel coefficients;
+//! 4. **acuity** ([`acuity`]): the Eq. 7 Gaussian with a per-pixel sigma;
+//! 5. **clip**, as the global operator.
+//!
+//! # Exactly the paper's model in the limit
+//!
+//! On a uniform image, and for any image as the radius grows without bound, every offset of
+//! the map is 0 and the local operator is the global one, pixels included (bit for bit: the
+//! per-pixel coefficients at offset 0 are the global coefficients; tested). With a finite
+//! radius the differences are the local model's.
+//!
+//! # Per-pixel coefficients from tables
+//!
+//! The coefficients depend on the pixel only through its two offsets, so they are tabulated
+//! at [`TABLE_STEPS_PER_LOG_UNIT`] nodes per log unit and interpolated linearly: Eq. 3-6 are
+//! evaluated a few thousand times per image, not per pixel. Offset 0 is a node, so the
+//! global coefficients are reproduced exactly; between nodes the relative error of a
+//! coefficient is below 5e-5 (the curvature of `10^x` over 1/128 log unit: `(ln 10/128)²/8
+//! = 4e-5`; tested).
+//!
+//! # Rod saturation
+//!
+//! "At levels above 2 log cd/m² the [rod t.v.i.] curve approaches a vertical asymptote ...
+//! the rod system is being overloaded" (Sec. 3.2, Fig. 3; Aguilar & Stiles 1954): rods
+//! cannot signal luminance beyond about 10² scotopic cd/m². With local adaptation a pixel
+//! can be far brighter than the neighbourhood its rods are weighted by (a light a few
+//! pixels wide in a dark street); its rod signal is then limited to
+//! [`ROD_SATURATION_SCOTOPIC_CD_M2`]. Without it, the rods of a dark neighbourhood (`k` near
+//! 1, `m_s` large) would add the light's full scotopic luminance as grey and turn it white,
+//! the failure the global model shows. In the limits above no pixel's rods are both
+//! weighted and saturated (on a uniform image `k > 0` needs a luminance under 45 scotopic
+//! cd/m²), except with an infinite radius and a scene brighter than that somewhere while
+//! the whole is mesopic; [`LocalAdaptation::rod_saturation`] turns the rule off.
+//!
+//! # Time course: a global state plus local offsets
+//!
+//! For video and sequences the observer's state is the global one of
+//! [`crate::timecourse::Adaptation`], stepped to each frame's global world adaptation; each
+//! pixel's threshold is its steady-state local threshold raised by the state's current log
+//! excess (the same for every pixel), and Eq. 8-9 are applied per pixel with the pixel's
+//! own adaptation luminance. So a pixel's display value of its own adaptation luminance stays
+//! constant over time as Eq. 9 requires, the whole field recovers together after a change
+//! of the light (the eye moves over the scene faster than it adapts), and once adapted the
+//! mapping is the steady local one exactly. See [`LocalMapping::for_time_course`].
+
+pub mod acuity;
+pub mod map;
+
+pub use map::AdaptationMap;
+
+use crate::colour::xyz_to_linear_srgb_matrix;
+use crate::mesopic::rod_weight;
+use crate::operator::{self, PixelStats, Report};
+use crate::scale::{photopic_scale, scotopic_scale};
+use crate::scotopic;
+use crate::{DisplayImage, Error, HdrImage, Result};
+
+/// Default radius of the adaptation neighbourhood, degrees: the fovea and its immediate
+/// surround (Ward Larson, Rushmeier & Piatko 1997 adapt to 1° foveal samples; Radiance's
+/// `pcond` likewise).
+pub const DEFAULT_ADAPTATION_RADIUS_DEG: f64 = 1.0;
+
+/// Scotopic luminance above which rods signal nothing more, scotopic cd/m²: the vertical
+/// asymptote of the rod t.v.i. curve at 2 log cd/m² (paper Sec. 3.2, Fig. 3; Aguilar &
+/// Stiles 1954, rod saturation).
+pub const ROD_SATURATION_SCOTOPIC_CD_M2: f32 = 100.0;
+
+/// Nodes per log10 unit of offset in the coefficient tables (a power of two, so that
+/// offset 0 is exactly a node).
+pub const TABLE_STEPS_PER_LOG_UNIT: f32 = 128.0;
+
+/// Options of local adaptation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalAdaptation {
+    /// Radius of the adaptation neighbourhood, degrees (the standard deviation of the
+    /// map's kernel along a uniform line; see [`map`]). `+∞` is the global model.
+    pub radius_deg: f64,
+    /// Limit each pixel's rod signal to [`ROD_SATURATION_SCOTOPIC_CD_M2`] (default on).
+    pub rod_saturation: bool,
+}
+
+impl Default for LocalAdaptation {
+    fn default() -> Self {
+        LocalAdaptation {
+            radius_deg: DEFAULT_ADAPTATION_RADIUS_DEG,
+            rod_saturation: true,
+        }
+    }
+}
+
+impl LocalAdaptation {
+    /// Check the radius.
+    pub fn validate(&self) -> Result<()> {
+        if self.radius_deg > 0.0 {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "adaptation-radius",
+                self.radius_deg,
+                "must be a positive number of degrees",
+            ))
+        }
+    }
+}
+
+/// One tabulated coefficient set: values at nodes `start + j/TABLE_STEPS_PER_LOG_UNIT`.
+#[derive(Debug, Clone, PartialEq)]
+struct Table<const K: usize> {
+    start: f32,
+    values: Vec<[f32; K]>,
+}
+
+impl<const K: usize> Table<K> {
+    /// Nodes covering `min..=max` (and 0), each `f(offset)`.
+    fn new(min: f32, max: f32, f: impl Fn(f64) -> [f32; K]) -> Self {
+        let steps = TABLE_STEPS_PER_LOG_UNIT;
+        let below = (-min.min(0.0) * steps).ceil();
+        let above = (max.max(0.0) * steps).ceil();
+        let count = (below + above) as usize + 2;
+        let values = (0..count)
+            .map(|j| f((j as f64 - f64::from(below)) / f64::from(steps)))
+            .collect();
+        Table {
+            start: -below / steps,
+            values,
+        }
+    }
+
+    /// Linear interpolation at `offset` (clamped to the table).
+    #[inline(always)]
+    fn at(&self, offset: f32) -> [f32; K] {
+        let last = self.values.len() - 2;
+        let p = ((offset - self.start) * TABLE_STEPS_PER_LOG_UNIT).clamp(0.0, last as f32 + 1.0);
+        let i = (p as usize).min(last);
+        let t = p - i as f32;
+        let (a, b) = (&self.values[i], &self.values[i + 1]);
+        std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
+    }
+}
+
+/// The per-pixel mapping of local adaptation: tables of the global operator's coefficients
+/// (display-relative) against the map's offsets (module docs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalMapping {
+    /// Against the photopic offset: the 3×3 XYZ → linear sRGB matrix times `m_p/L_dmax`
+    /// (row-major), then `b_p/L_dmax`.
+    cone: Table<10>,
+    /// Against the scotopic offset: `k·m_s/L_dmax`, `k·b_s/L_dmax`.
+    rod: Table<2>,
+    /// `L_dmax`, cd/m².
+    display_max_cd_m2: f64,
+    /// Limit the rod signal (see the module docs).
+    rod_saturation: bool,
+}
+
+impl LocalMapping {
+    /// Tables for `map`, with `cone(L) = (m_p, b_p)` for a cone adaptation luminance `L`
+    /// (cd/m²) and `rod(L_s) = (m_s, b_s)` for a rod adaptation `L_s` (scotopic cd/m²), in
+    /// display cd/m² per world unit and display cd/m²; `k` is Eq. 6 at `L_s`.
+    pub fn new(
+        map: &AdaptationMap,
+        display_max_cd_m2: f64,
+        rod_saturation: bool,
+        cone: impl Fn(f64) -> (f64, f64),
+        rod: impl Fn(f64) -> (f64, f64),
+    ) -> Self {
+        let range = |v: &[f32]| {
+            v.iter()
+                .fold((0f32, 0f32), |(lo, hi), &x| (lo.min(x), hi.max(x)))
+        };
+        let (lp, hp) = range(&map.offset_log);
+        let (ls, hs) = range(&map.offset_scotopic_log);
+        let xyz2rgb = xyz_to_linear_srgb_matrix();
+        let (lwa, lwa_s) = (
+            map.world_adaptation_cd_m2,
+            map.world_adaptation_scotopic_cd_m2,
+        );
+        let cone = Table::new(lp, hp, |d| {
+            // `10^0` is exactly 1, so offset 0 is the global level exactly.
+            let (m, b) = cone(lwa * 10f64.powf(d));
+            let s = m / display_max_cd_m2;
+            let mut out = [0f32; 10];
+            for (r, row) in xyz2rgb.iter().enumerate() {
+                for (c, v) in row.iter().enumerate() {
+                    out[3 * r + c] = (v * s) as f32;
+                }
+            }
+            out[9] = (b / display_max_cd_m2) as f32;
+            out
+        });
+        let rod = Table::new(ls, hs, |d| {
+            let l = lwa_s * 10f64.powf(d);
+            let (m, b) = rod(l);
+            let k = rod_weight(l);
+            [
+                (k * m / display_max_cd_m2) as f32,
+                (k * b / display_max_cd_m2) as f32,
+            ]
+        });
+        LocalMapping {
+            cone,
+            rod,
+            display_max_cd_m2,
+            rod_saturation,
+        }
+    }
+
+    /// The steady-state mapping (Eq. 3-6 at each pixel's adaptation) for the display of a
+    /// [`operator::plan`] report.
+    pub fn steady_state(map: &AdaptationMap, report: &Report, rod_saturation: bool) -> Self {
+        let lda = report.display_adaptation_cd_m2;
+        LocalMapping::new(
+            map,
+            report.mapping.display_max_cd_m2,
+            rod_saturation,
+            |l| (photopic_scale(l, lda), 0.0),
+            |l| (scotopic_scale(l, lda), 0.0),
+        )
+    }
+
+    /// The Eq. 8-9 mapping of a time-varying state at each pixel's adaptation (module docs:
+    /// a global state plus local offsets), for the display of a steady-state report of the
+    /// current frame.
+    pub fn for_time_course(
+        map: &AdaptationMap,
+        state: &crate::timecourse::Adaptation,
+        report: &Report,
+        rod_saturation: bool,
+    ) -> Self {
+        let lda = report.display_adaptation_cd_m2;
+        let display_threshold = crate::tvi::cone_threshold_cd_m2(lda);
+        let cone_excess = 10f64.powf(state.cone_excess_log());
+        let rod_excess = 10f64.powf(state.rod_excess_log());
+        let cone_floor = 10f64.powf(crate::tvi::CONE_FLOOR_LOG);
+        let rod_floor = 10f64.powf(crate::tvi::ROD_FLOOR_LOG);
+        LocalMapping::new(
+            map,
+            report.mapping.display_max_cd_m2,
+            rod_saturation,
+            |l| {
+                let t = (crate::tvi::cone_threshold_cd_m2(l) * cone_excess).max(cone_floor);
+                let m = display_threshold / t;
+                (m, l * (photopic_scale(l, lda) - m))
+            },
+            |l| {
+                let t = (crate::tvi::rod_threshold_scotopic_cd_m2(l) * rod_excess).max(rod_floor);
+                let m = display_threshold / t;
+                (m, l * (scotopic_scale(l, lda) - m))
+            },
+        )
+    }
+}
+
+/// Apply a [`LocalMapping`] with its [`AdaptationMap`] to an image: the per-pixel mapping,
+/// the per-pixel acuity Gaussian (when the map has sigmas), and the global operator's
+/// clipping rule (see [`operator::apply`]).
+///
+/// # Panics
+/// If the image's planes are inconsistent or the map is of another size.
+pub fn apply_into(
+    image: &HdrImage,
+    map: &AdaptationMap,
+    mapping: &LocalMapping,
+    out: &mut DisplayImage,
+) -> PixelStats {
+    let n = image.len();
+    assert_eq!((map.width, map.height), (image.width, image.height));
+    out.width = image.width;
+    out.height = image.height;
+    out.display_max_cd_m2 = mapping.display_max_cd_m2 as f32;
+    for plane in [&mut out.r, &mut out.g, &mut out.b] {
+        plane.resize(n, 0.0);
+    }
+    let DisplayImage { r, g, b, .. } = out;
+    let blur = map
+        .acuity_sigma_px
+        .as_ref()
+        .filter(|s| s.iter().any(|&v| v > 0.0));
+    let mut stats = operator::par_chunks(r, g, b, |start, r, g, b| {
+        let mut s = map_chunk(image, map, mapping, start, r, g, b);
+        if blur.is_none() {
+            s.clipped = operator::clip_chunk(r, g, b).clipped;
+        }
+        s
+    });
+    if let Some(sigma) = blur {
+        acuity::varying_gaussian_blur(
+            &mut [r.as_mut_slice(), g.as_mut_slice(), b.as_mut_slice()],
+            image.width,
+            image.height,
+            sigma,
+        );
+        stats.clipped =
+            operator::par_chunks(r, g, b, |_, r, g, b| operator::clip_chunk(r, g, b)).clipped;
+    }
+    stats
+}
+
+fn map_chunk(
+    image: &HdrImage,
+    map: &AdaptationMap,
+    mapping: &LocalMapping,
+    start: usize,
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+) -> PixelStats {
+    let end = start + r.len();
+    let (mut non_finite, mut negative) = (0usize, 0usize);
+    let saturation = if mapping.rod_saturation {
+        ROD_SATURATION_SCOTOPIC_CD_M2
+    } else {
+        f32::INFINITY
+    };
+    let (dp, ds) = (
+        &map.offset_log[start..end],
+        &map.offset_scotopic_log[start..end],
+    );
+    for (j, i) in (start..end).enumerate() {
+        let s = image.scotopic.as_ref().map_or(0.0, |s| s[i]);
+        let (finite, neg, [x, y, z, s]) =
+            operator::sanitize([image.x[i], image.y[i], image.z[i], s]);
+        non_finite += usize::from(!finite);
+        negative += usize::from(neg);
+        let v = match &image.scotopic {
+            Some(_) => s,
+            None => scotopic::from_xyz(x, y, z),
+        };
+        let c = mapping.cone.at(dp[j]);
+        let [rod, rod_offset] = mapping.rod.at(ds[j]);
+        // The same expression, in the same order, as the global operator's pixel.
+        let grey = rod * v.min(saturation) + (c[9] + rod_offset);
+        r[j] = c[0] * x + c[1] * y + c[2] * z + grey;
+        g[j] = c[3] * x + c[4] * y + c[5] * z + grey;
+        b[j] = c[6] * x + c[7] * y + c[8] * z + grey;
+    }
+    PixelStats {
+        non_finite,
+        negative,
+        clipped: 0,
+    }
+}
+
+/// Quantiles of a local adaptation level over the image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Quantiles {
+    /// Lowest value.
+    pub min: f64,
+    /// 1st percentile.
+    pub p01: f64,
+    /// 10th percentile.
+    pub p10: f64,
+    /// Median.
+    pub p50: f64,
+    /// 90th percentile.
+    pub p90: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Highest value.
+    pub max: f64,
+}
+
+impl Quantiles {
+    fn of(mut v: Vec<f64>) -> Self {
+        v.sort_by(f64::total_cmp);
+        let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+        Quantiles {
+            min: v[0],
+            p01: q(0.01),
+            p10: q(0.1),
+            p50: q(0.5),
+            p90: q(0.9),
+            p99: q(0.99),
+            max: v[v.len() - 1],
+        }
+    }
+}
+
+/// What local adaptation used: its options and the spread of the map.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalReport {
+    /// Radius of the neighbourhood, degrees.
+    pub radius_deg: f64,
+    /// Pixels between the samples of the map's filter grid.
+    pub grid_step_px: usize,
+    /// Whether the rod signal was limited to [`ROD_SATURATION_SCOTOPIC_CD_M2`].
+    pub rod_saturation: bool,
+    /// The local photopic adaptation over the image, cd/m² (quantiles over pixels).
+    pub adaptation_cd_m2: Quantiles,
+    /// The local scotopic adaptation, scotopic cd/m².
+    pub adaptation_scotopic_cd_m2: Quantiles,
+    /// The rod weight `k` (Eq. 6) at the local scotopic adaptation.
+    pub rod_weight: Quantiles,
+    /// The acuity Gaussian's sigma, pixels; `None` without acuity.
+    pub acuity_sigma_px: Option<Quantiles>,
+}
+
+impl LocalReport {
+    /// The report of a map (quantiles over a subsample of at most about 2^16 pixels).
+    pub fn of(map: &AdaptationMap, rod_saturation: bool) -> Self {
+        let n = map.width * map.height;
+        let stride = (n / 65_536).max(1);
+        let idx = || (0..n).step_by(stride);
+        let la = Quantiles::of(idx().map(|i| map.adaptation_cd_m2(i)).collect());
+        let las: Vec<f64> = idx().map(|i| map.adaptation_scotopic_cd_m2(i)).collect();
+        let k = Quantiles::of(las.iter().map(|&l| rod_weight(l)).collect());
+        LocalReport {
+            radius_deg: map.radius_deg,
+            grid_step_px: map.grid_step_px,
+            rod_saturation,
+            adaptation_cd_m2: la,
+            adaptation_scotopic_cd_m2: Quantiles::of(las),
+            rod_weight: k,
+            acuity_sigma_px: map
+                .acuity_sigma_px
+                .as_ref()
+                .map(|s| Quantiles::of(idx().map(|i| f64::from(s[i])).collect())),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tables_hit_zero_exactly_and_interpolate_closely() {
+        let f = |d: f64| [10f64.powf(-d) as f32];
+        let t = Table::<1>::new(-3.3, 2.1, f);
+        assert_eq!(t.at(0.0), f(0.0));
+        let mut worst = 0f64;
+        for k in 0..10_000 {
+            let d = -3.3 + 5.4 * f64::from(k) / 9999.0;
+            let got = f64::from(t.at(d as f32)[0]);
+            let want = 10f64.powf(-(d as f32) as f64);
+            worst = worst.max((got / want - 1.0).abs());
+        }
+        assert!(worst < 5e-5, "{worst}");
+        // Beyond the ends: the end values.
+        assert_eq!(t.at(-10.0), t.values[0]);
+    }
+}
