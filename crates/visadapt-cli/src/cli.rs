@@ -143,9 +143,53 @@ pub enum ProjectionArg {
     Fisheye,
 }
 
+/// One adaptation level for the scene or one per pixel (map, visible, tolerance, sequence,
+/// video, demo).
+#[derive(Debug, Clone, Args)]
+pub struct AdaptationArgs {
+    /// How the observer adapts: `global`, one level for the whole scene (the paper's
+    /// model), or `local`, every point seen by an eye adapted to its own neighbourhood
+    /// (see --adaptation-radius).
+    #[arg(long, value_enum, value_name = "MODE", default_value_t = AdaptationKind::Global)]
+    pub adaptation: AdaptationKind,
+
+    /// With --adaptation local: radius of the neighbourhood the eye adapts to, degrees
+    /// (the fovea and its surround).
+    #[arg(long, allow_negative_numbers = true, value_name = "DEG",
+          default_value_t = visadapt::local::DEFAULT_ADAPTATION_RADIUS_DEG)]
+    pub adaptation_radius: f64,
+}
+
+/// The values of `--adaptation`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum AdaptationKind {
+    /// One adaptation level for the scene (paper Sec. 4.4).
+    Global,
+    /// An adaptation level per pixel, from its neighbourhood.
+    Local,
+}
+
+impl AdaptationArgs {
+    /// The library's adaptation mode.
+    pub fn mode(&self) -> visadapt::operator::AdaptationMode {
+        match self.adaptation {
+            AdaptationKind::Global => visadapt::operator::AdaptationMode::Global,
+            AdaptationKind::Local => {
+                visadapt::operator::AdaptationMode::Local(visadapt::local::LocalAdaptation {
+                    radius_deg: self.adaptation_radius,
+                    ..Default::default()
+                })
+            }
+        }
+    }
+}
+
 /// Model options every image command has (map, visible, tolerance, sequence, video).
 #[derive(Debug, Clone, Args)]
 pub struct ViewingArgs {
+    #[command(flatten)]
+    pub adaptation: AdaptationArgs,
+
     /// Fraction of pixels allowed to be brighter than the "highest visible" luminance,
     /// so that a few hot pixels do not set the adaptation.
     #[arg(long, allow_negative_numbers = true, value_parser = fraction, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
@@ -193,6 +237,7 @@ impl ViewingArgs {
             world_adaptation_scotopic_cd_m2: world.and_then(|w| w.scotopic_adaptation),
             hot_pixel_fraction: self.hot_pixel_fraction,
             acuity: view.is_none_or(|v| !v.no_acuity),
+            adaptation: self.adaptation.mode(),
             ..defaults
         }
     }
@@ -463,6 +508,9 @@ pub struct DemoArgs {
     /// Skip the Fig. 12 light- and dark-adaptation sequences.
     #[arg(long)]
     pub no_sequences: bool,
+
+    #[command(flatten)]
+    pub adaptation: AdaptationArgs,
 }
 
 #[derive(Debug, Args)]

@@ -93,12 +93,45 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
         source(r.view_source),
         ppd,
         blur,
-    ) + &if stats.clipped > 0 {
+    ) + &local_text(r)
+        + &if stats.clipped > 0 {
+            format!(
+                "clipped                       {} pixels above the display maximum\n",
+                stats.clipped
+            )
+        } else {
+            String::new()
+        }
+}
+
+/// The local-adaptation lines of the map report (nothing for global adaptation).
+fn local_text(r: &Report) -> String {
+    let Some(l) = &r.local else {
+        return String::new();
+    };
+    let q = &l.adaptation_cd_m2;
+    let k = &l.rod_weight;
+    let blur = l.acuity_sigma_px.as_ref().map_or(String::new(), |s| {
         format!(
-            "clipped                       {} pixels above the display maximum\n",
-            stats.clipped
+            "local acuity blur             sigma {:.3} to {:.3} px (median {:.3})\n",
+            s.min, s.max, s.p50
         )
-    } else {
-        String::new()
-    }
+    });
+    format!(
+        "local adaptation              radius {} deg, map grid every {} px, rod saturation {}\n\
+         local adaptation level        {:.4e} to {:.4e} cd/m² (1 %: {:.4e}, median {:.4e}, 99 %: {:.4e})\n\
+         local rod weight k            {:.3} to {:.3} (median {:.3})\n{}",
+        l.radius_deg,
+        l.grid_step_px,
+        if l.rod_saturation { "on" } else { "off" },
+        q.min,
+        q.max,
+        q.p01,
+        q.p50,
+        q.p99,
+        k.min,
+        k.max,
+        k.p50,
+        blur,
+    )
 }

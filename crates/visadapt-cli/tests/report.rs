@@ -145,3 +145,59 @@ fn visible_and_tolerance_json_are_the_library_reports() {
     assert!(summary.min_cd_m2 <= summary.median_cd_m2);
     assert!(summary.median_cd_m2 <= summary.max_cd_m2);
 }
+
+#[test]
+fn map_json_reports_local_adaptation() {
+    let input = data("sunset-fisheye.hdr");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let cli = visadapt()
+        .args(["map", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .args([
+            "--json",
+            "--adaptation",
+            "local",
+            "--adaptation-radius",
+            "2",
+        ])
+        .assert()
+        .success();
+    let v = json(&cli.get_output().stdout);
+    assert_eq!(v["adaptation"], "local");
+    let l = &v["local"];
+    assert_eq!(l["radius_deg"], 2.0);
+    let q = &l["adaptation_cd_m2"];
+    let (lo, mid, hi) = (
+        q["min"].as_f64().unwrap(),
+        q["p50"].as_f64().unwrap(),
+        q["max"].as_f64().unwrap(),
+    );
+    // The brightest neighbourhoods sit at (or just above) the global level; the median far
+    // below it in this sunset (sky over dark ground).
+    let global = v["adaptation_cd_m2"].as_f64().unwrap();
+    assert!(
+        lo < mid && mid < global && global <= hi * 1.0001,
+        "{lo} {mid} {global} {hi}"
+    );
+    // The default stays global, with no local part.
+    let cli = visadapt()
+        .args([
+            "map",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--json",
+        ])
+        .assert()
+        .success();
+    let v = json(&cli.get_output().stdout);
+    assert_eq!(v["adaptation"], "global");
+    assert!(v["local"].is_null());
+    // A bad radius is one clear error.
+    visadapt()
+        .args(["map", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
+        .args(["--adaptation", "local", "--adaptation-radius", "0"])
+        .assert()
+        .failure()
+        .stderr(predicates::str::contains("adaptation-radius"));
+}

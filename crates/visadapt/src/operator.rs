@@ -301,6 +301,32 @@ pub fn map(image: &HdrImage, conditions: &ViewingConditions) -> Result<Output> {
     })
 }
 
+/// The frame stage of a time course: the Eq. 8-9 mapping of the observer's `state` applied
+/// to `image` (whose [`plan`] under `conditions` is `report`), into `out`. With
+/// [`AdaptationMode::Global`] this is `state.mapping(report)` and [`apply_into`]; with
+/// local adaptation the adaptation map of `image` is computed and every pixel mapped at
+/// its own level with the state's excess ([`LocalMapping::for_time_course`]: a global
+/// state plus local offsets). Returns the global mapping (the one reports show) and the
+/// pixel counts.
+pub fn apply_state_into(
+    image: &HdrImage,
+    report: &Report,
+    state: &crate::timecourse::Adaptation,
+    conditions: &ViewingConditions,
+    out: &mut DisplayImage,
+) -> Result<(Mapping, PixelStats)> {
+    let mapping = state.mapping(report);
+    let stats = match conditions.adaptation {
+        AdaptationMode::Global => apply_into(image, &mapping, out),
+        AdaptationMode::Local(options) => {
+            let map = local_map(image, report, conditions, &options)?;
+            let local = LocalMapping::for_time_course(&map, state, report, options.rod_saturation);
+            local::apply_into(image, &map, &local, out)
+        }
+    };
+    Ok((mapping, stats))
+}
+
 /// The adaptation map of `image` for local adaptation `options`, anchored to its [`plan`]
 /// `report` under `conditions`.
 pub fn local_map(

@@ -11,6 +11,7 @@
 //! Available with the `json` feature (on by default).
 
 use crate::Projection;
+use crate::local::{LocalReport, Quantiles};
 use crate::observer::Observer;
 use crate::operator::{PixelStats, Report, Source};
 use crate::timecourse::Moment;
@@ -89,6 +90,30 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
         "pixels_non_finite": stats.non_finite,
         "pixels_negative": stats.negative,
         "pixels_clipped": stats.clipped,
+        "adaptation": if r.local.is_some() { "local" } else { "global" },
+        "local": r.local.as_ref().map(local_json),
+    })
+}
+
+/// Quantiles as `{"min", "p01", "p10", "p50", "p90", "p99", "max"}`.
+fn quantiles_json(q: &Quantiles) -> Value {
+    json!({
+        "min": q.min, "p01": q.p01, "p10": q.p10, "p50": q.p50,
+        "p90": q.p90, "p99": q.p99, "max": q.max,
+    })
+}
+
+/// The local-adaptation part of a report (`"local"` in `map --json`).
+pub fn local_json(l: &LocalReport) -> Value {
+    json!({
+        "radius_deg": l.radius_deg,
+        "grid_step_px": l.grid_step_px,
+        "rod_saturation": l.rod_saturation,
+        "rod_saturation_scotopic_cd_m2": crate::local::ROD_SATURATION_SCOTOPIC_CD_M2,
+        "adaptation_cd_m2": quantiles_json(&l.adaptation_cd_m2),
+        "scotopic_adaptation_cd_m2": quantiles_json(&l.adaptation_scotopic_cd_m2),
+        "rod_weight": quantiles_json(&l.rod_weight),
+        "blur_sigma_px": l.acuity_sigma_px.as_ref().map(quantiles_json),
     })
 }
 

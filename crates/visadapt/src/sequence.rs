@@ -190,8 +190,7 @@ pub fn render(
         before.world_adaptation_cd_m2,
         before.world_adaptation_scotopic_cd_m2,
     )?;
-    let mapping = eye.mapping(&before);
-    let stats = operator::apply_into(&lit, &mapping, &mut out);
+    let (mapping, stats) = operator::apply_state_into(&lit, &before, &eye, conditions, &mut out)?;
     on_frame(&Frame {
         index: 0,
         t_seconds: None,
@@ -209,8 +208,8 @@ pub fn render(
     for (i, &t) in sequence.times_seconds.iter().enumerate() {
         eye.step_to(t - now, &after)?;
         now = t;
-        let mapping = eye.mapping(&after);
-        let stats = operator::apply_into(&lit, &mapping, &mut out);
+        let (mapping, stats) =
+            operator::apply_state_into(&lit, &after, &eye, conditions, &mut out)?;
         on_frame(&Frame {
             index: i + 1,
             t_seconds: Some(t),

@@ -313,6 +313,13 @@ impl Viewer<'static> {
     /// The observer the operator would use for `image` under `conditions` (adaptation by
     /// Sec. 4.4 or as given, acuity from the view), with the report of [`operator::plan`].
     pub fn for_image(image: &HdrImage, conditions: &ViewingConditions) -> Result<(Self, Report)> {
+        if let operator::AdaptationMode::Local(_) = conditions.adaptation {
+            return Err(Error::invalid(
+                "adaptation",
+                "local",
+                "is not supported by the visibility metric yet",
+            ));
+        }
         let report = operator::plan(image, conditions)?;
         Ok((Viewer::from_report(&report), report))
     }

@@ -215,8 +215,9 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
                 state
             }
         };
-        let mapping = state.mapping(&report);
-        operator::apply_into(&hdr, &mapping, &mut display);
+        let (mapping, _) =
+            operator::apply_state_into(&hdr, &report, state, &conditions, &mut display)
+                .with_context(what)?;
         let out = out_path(input);
         io::write_display(&display, &out, format).with_context(|| out.display().to_string())?;
         if args.json {
