@@ -32,7 +32,7 @@ pub fn levels(sigma_px: &[f32]) -> Vec<f32> {
             hi = hi.max(s);
         }
     }
-    if !(lo.is_finite()) {
+    if !lo.is_finite() {
         return Vec::new();
     }
     let mut out = vec![lo];
@@ -48,7 +48,8 @@ pub fn levels(sigma_px: &[f32]) -> Vec<f32> {
 /// below [`MIN_BLUR_SIGMA_PX`].
 #[inline]
 fn weight(levels: &[f32], j: usize, s: f32) -> f32 {
-    if !(f64::from(s) >= MIN_BLUR_SIGMA_PX) {
+    // NaN and small sigmas: not blurred.
+    if f64::from(s).is_nan() || f64::from(s) < MIN_BLUR_SIGMA_PX {
         return 0.0;
     }
     let v = s * s;

@@ -165,7 +165,7 @@ impl AdaptationMap {
         hot_pixel_fraction: f64,
     ) -> Result<Self> {
         image.check_consistent()?;
-        if !(radius_deg > 0.0) {
+        if radius_deg.is_nan() || radius_deg <= 0.0 {
             return Err(Error::invalid(
                 "adaptation-radius",
                 radius_deg,
