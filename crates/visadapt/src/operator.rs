@@ -444,6 +444,15 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
     })
 }
 
+/// The rows of the cone image's matrix for `mapping` at a photopic scale `m_p`: linear sRGB
+/// from XYZ times `m_p / L_dmax`, as `f32`. The one place the cone matrix is built, for the
+/// global operator and for the per-pixel tables of [`crate::local`].
+pub(crate) fn cone_rows(mapping: &Mapping, photopic_scale: f64) -> [[f32; 3]; 3] {
+    let xyz2rgb = xyz_to_linear_srgb_matrix();
+    let s = photopic_scale / mapping.display_max_cd_m2;
+    xyz2rgb.map(|row| row.map(|v| (v * s) as f32))
+}
+
 /// Per-pixel coefficients of the mapping, display-relative.
 #[derive(Clone, Copy)]
 struct Coefficients {
@@ -457,9 +466,7 @@ struct Coefficients {
 
 impl Coefficients {
     fn new(m: &Mapping) -> Self {
-        let xyz2rgb = xyz_to_linear_srgb_matrix();
-        let s = m.photopic_scale / m.display_max_cd_m2;
-        let cone = xyz2rgb.map(|row| row.map(|v| (v * s) as f32));
+        let cone = cone_rows(m, m.photopic_scale);
         Coefficients {
             cone,
             rod: (m.rod_weight * m.scotopic_scale / m.display_max_cd_m2) as f32,

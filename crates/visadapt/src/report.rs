@@ -189,6 +189,8 @@ pub fn difference_json(d: &Difference, r: &Report, input_scale: f64, map: Option
         "input_scale": input_scale,
         "non_finite_pixels": d.non_finite_pixels,
         "map": map,
+        "adaptation": if r.local.is_some() { "local" } else { "global" },
+        "local": r.local.as_ref().map(local_json),
     })
 }
 
@@ -217,5 +219,7 @@ pub fn tolerance_json(
         "median_relative_tolerance": summary.median_relative,
         "input_scale": input_scale,
         "output": output,
+        "adaptation": if r.local.is_some() { "local" } else { "global" },
+        "local": r.local.as_ref().map(local_json),
     })
 }

@@ -17,9 +17,9 @@
 //! * from given adaptation luminances: [`Viewer::steady_state`];
 //! * from a time-varying adaptation state ([`crate::timecourse::Adaptation`]):
 //!   [`Sensitivity::from_time_course`], or any thresholds filled into a [`Sensitivity`];
-//! * per pixel ([`Adaptation::Local`]): a map of adaptation luminances, one per pixel
-//!   (e.g. a foveal average around each pixel, as Ward Larson et al. 1997 use), where
-//!   Eq. 4–6 are evaluated at each pixel's own levels.
+//! * per pixel ([`Adaptation::Local`], [`Viewer::local`]): the operator's adaptation map
+//!   ([`crate::local`], what `--adaptation local` uses), or any map of levels, where
+//!   Eq. 4–7 are evaluated at each pixel's own levels, with the same tables as the operator.
 //!
 //! In the paper's model the observer is adapted to one level for the whole scene, so by
 //! default the thresholds are the same everywhere: a 1 cd/m² change is as visible in the
@@ -91,6 +91,7 @@
 //! the remaining noise is (just) invisible.
 
 use crate::acuity::AcuityFilter;
+use crate::local::{AdaptationMap, Table};
 use crate::mesopic::rod_weight;
 use crate::operator::{self, MIN_BLUR_SIGMA_PX, Report, ViewingConditions};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
@@ -233,66 +234,95 @@ pub enum Adaptation<'a> {
     /// One state for the whole field of view: the paper's observer adapted to `L_wa`
     /// (Sec. 4.4), or a time-varying state.
     Global(Sensitivity),
-    /// Local adaptation: each pixel's own photopic (cd/m²) and scotopic (scotopic cd/m²)
-    /// adaptation luminance, in steady state (Eq. 4–6 at each pixel). Both maps hold one
-    /// value per pixel, row-major; values must be finite and non-negative.
-    Local {
-        /// Photopic adaptation luminance per pixel, cd/m².
-        adaptation_cd_m2: &'a [f32],
-        /// Scotopic adaptation luminance per pixel, scotopic cd/m².
-        adaptation_scotopic_cd_m2: &'a [f32],
-    },
+    /// Local adaptation: each pixel's own photopic and scotopic adaptation, in steady state
+    /// (Eq. 4-6 at each pixel), from the operator's adaptation map
+    /// ([`operator::local_map`], the same map `map --adaptation local` shows) or any map of
+    /// levels ([`AdaptationMap::from_levels`]). The map's per-pixel acuity Gaussian, when it
+    /// has one, replaces [`Viewer::acuity_sigma_px`].
+    Local(&'a AdaptationMap),
+}
+
+/// Per-pixel `(1/t_p, k/t_s)` of a local map, tabulated against its offsets as the
+/// operator's coefficients are ([`crate::local`]; offset 0 is the global value exactly).
+struct LocalGains {
+    cone: Table<1>,
+    rod: Table<1>,
+}
+
+impl LocalGains {
+    fn new(map: &AdaptationMap) -> Self {
+        let range = |v: &[f32]| {
+            v.iter()
+                .fold((0f32, 0f32), |(lo, hi), &x| (lo.min(x), hi.max(x)))
+        };
+        let (lp, hp) = range(&map.offset_log);
+        let (ls, hs) = range(&map.offset_scotopic_log);
+        let (lwa, lwa_s) = (
+            map.world_adaptation_cd_m2,
+            map.world_adaptation_scotopic_cd_m2,
+        );
+        LocalGains {
+            cone: Table::new(lp, hp, |d| {
+                [(1.0 / cone_threshold_cd_m2(lwa * 10f64.powf(d))) as f32]
+            }),
+            rod: Table::new(ls, hs, |d| {
+                let l = lwa_s * 10f64.powf(d);
+                [(rod_weight(l) / rod_threshold_scotopic_cd_m2(l)) as f32]
+            }),
+        }
+    }
 }
 
 impl Adaptation<'_> {
+    /// The per-pixel gains' tables (`None` for a global state).
+    fn local_gains(&self) -> Option<LocalGains> {
+        match self {
+            Adaptation::Global(_) => None,
+            Adaptation::Local(map) => Some(LocalGains::new(map)),
+        }
+    }
+
     /// `(1/t_p, k/t_s)` at pixel `i`.
     #[inline]
-    fn gains_at(&self, global: (f32, f32), i: usize) -> (f32, f32) {
-        match self {
-            Adaptation::Global(_) => global,
-            Adaptation::Local {
-                adaptation_cd_m2,
-                adaptation_scotopic_cd_m2,
-            } => Sensitivity::steady_state(
-                f64::from(adaptation_cd_m2[i]),
-                f64::from(adaptation_scotopic_cd_m2[i]),
-            )
-            .gains(),
+    fn gains_at(&self, global: (f32, f32), local: Option<&LocalGains>, i: usize) -> (f32, f32) {
+        match (self, local) {
+            (Adaptation::Local(map), Some(g)) => (
+                g.cone.at(map.offset_log[i])[0],
+                g.rod.at(map.offset_scotopic_log[i])[0],
+            ),
+            _ => global,
         }
     }
 
     fn global_gains(&self) -> (f32, f32) {
         match self {
             Adaptation::Global(s) => s.gains(),
-            Adaptation::Local { .. } => (0.0, 0.0),
+            Adaptation::Local(_) => (0.0, 0.0),
         }
     }
 
     fn validate(&self, pixels: usize) -> Result<()> {
         match self {
             Adaptation::Global(s) => s.validate(),
-            Adaptation::Local {
-                adaptation_cd_m2,
-                adaptation_scotopic_cd_m2,
-            } => {
-                for (name, map) in [
-                    ("adaptation map", adaptation_cd_m2),
-                    ("scotopic adaptation map", adaptation_scotopic_cd_m2),
-                ] {
-                    if map.len() != pixels {
-                        return Err(Error::invalid(
-                            name,
-                            format!("of {} values", map.len()),
-                            format!("must hold one value per pixel ({pixels})"),
-                        ));
-                    }
-                    if let Some(v) = map.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
-                        return Err(Error::invalid(
-                            name,
-                            v,
-                            "values must be finite, non-negative luminances",
-                        ));
-                    }
+            Adaptation::Local(map) => {
+                if map.offset_log.len() != pixels || map.offset_scotopic_log.len() != pixels {
+                    return Err(Error::invalid(
+                        "adaptation map",
+                        format!("of {} values", map.offset_log.len()),
+                        format!("must hold one value per pixel ({pixels})"),
+                    ));
+                }
+                if let Some(v) = map
+                    .offset_log
+                    .iter()
+                    .chain(&map.offset_scotopic_log)
+                    .find(|v| !v.is_finite())
+                {
+                    return Err(Error::invalid(
+                        "adaptation map",
+                        v,
+                        "offsets must be finite",
+                    ));
                 }
                 Ok(())
             }
@@ -317,7 +347,7 @@ impl Viewer<'static> {
             return Err(Error::invalid(
                 "adaptation",
                 "local",
-                "is not supported by the visibility metric yet",
+                "needs its adaptation map: use Observation::for_image",
             ));
         }
         let report = operator::plan(image, conditions)?;
@@ -359,6 +389,18 @@ impl Viewer<'static> {
     }
 }
 
+impl<'a> Viewer<'a> {
+    /// A steady-state observer adapted locally, pixel by pixel, as `map` says (the
+    /// operator's adaptation map of the image, [`operator::local_map`]), with the map's
+    /// per-pixel acuity Gaussian (none when the map has no sigmas).
+    pub fn local(map: &'a AdaptationMap) -> Self {
+        Viewer {
+            adaptation: Adaptation::Local(map),
+            acuity_sigma_px: 0.0,
+        }
+    }
+}
+
 impl Viewer<'_> {
     /// Check the thresholds, the maps' sizes against `pixels`, and the blur size.
     pub fn validate(&self, pixels: usize) -> Result<()> {
@@ -371,6 +413,42 @@ impl Viewer<'_> {
             ));
         }
         Ok(())
+    }
+}
+
+/// The observer the operator would use for an image, global or local: its [`Report`] and,
+/// with [`AdaptationMode::Local`](operator::AdaptationMode::Local), its adaptation map
+/// (the report's `local` part filled in). [`Observation::viewer`] is the [`Viewer`].
+#[derive(Debug, Clone)]
+pub struct Observation {
+    /// What the model used (the [`operator::plan`] of the image).
+    pub report: Report,
+    /// The adaptation map, with local adaptation.
+    pub map: Option<AdaptationMap>,
+}
+
+impl Observation {
+    /// The observation of `image` under `conditions` (adaptation by Sec. 4.4 or as given,
+    /// globally or locally, acuity from the view).
+    pub fn for_image(image: &HdrImage, conditions: &ViewingConditions) -> Result<Self> {
+        let mut report = operator::plan(image, conditions)?;
+        let map = match conditions.adaptation {
+            operator::AdaptationMode::Global => None,
+            operator::AdaptationMode::Local(options) => {
+                let map = operator::local_map(image, &report, conditions, &options)?;
+                report.local = Some(crate::local::LocalReport::of(&map, options.rod_saturation));
+                Some(map)
+            }
+        };
+        Ok(Observation { report, map })
+    }
+
+    /// The viewer: per pixel with a map, else the report's global state.
+    pub fn viewer(&self) -> Viewer<'_> {
+        match &self.map {
+            Some(map) => Viewer::local(map),
+            None => Viewer::from_report(&self.report),
+        }
     }
 }
 
@@ -432,21 +510,32 @@ pub fn difference(reference: &HdrImage, test: &HdrImage, viewer: &Viewer) -> Res
     let non_finite = par_chunks2(&mut dy, &mut dv, |start, dy, dv| {
         accumulate(reference, start, -1.0, dy, dv) + accumulate(test, start, 1.0, dy, dv)
     });
-    if viewer.acuity_sigma_px > 0.0 {
-        crate::blur::gaussian_blur_planes(
+    match &viewer.adaptation {
+        Adaptation::Local(AdaptationMap {
+            acuity_sigma_px: Some(sigma),
+            ..
+        }) => crate::local::acuity::varying_gaussian_blur(
+            &mut [dy.as_mut_slice(), dv.as_mut_slice()],
+            width,
+            height,
+            sigma,
+        ),
+        _ if viewer.acuity_sigma_px > 0.0 => crate::blur::gaussian_blur_planes(
             &mut [dy.as_mut_slice(), dv.as_mut_slice()],
             width,
             height,
             viewer.acuity_sigma_px as f32,
-        );
+        ),
+        _ => {}
     }
 
     // Steps 3–4: each mechanism in its threshold units, pooled. The result goes into `dy`.
     let adaptation = &viewer.adaptation;
     let global = adaptation.global_gains();
+    let local = adaptation.local_gains();
     par_chunks2(&mut dy, &mut dv, |start, dy, dv| {
         for (j, (d, v)) in dy.iter_mut().zip(dv.iter()).enumerate() {
-            let (cone, rod) = adaptation.gains_at(global, start + j);
+            let (cone, rod) = adaptation.gains_at(global, local.as_ref(), start + j);
             *d = pool_f32(d.abs() * cone, v.abs() * rod);
         }
         0
@@ -480,6 +569,7 @@ pub fn tolerance_map(image: &HdrImage, viewer: &Viewer) -> Result<Vec<f32>> {
     viewer.validate(n)?;
     let adaptation = &viewer.adaptation;
     let global = adaptation.global_gains();
+    let local = adaptation.local_gains();
     let mut out = vec![0f32; n];
     let mut v = vec![0f32; n];
     par_chunks2(&mut out, &mut v, |start, out, v| {
@@ -490,7 +580,7 @@ pub fn tolerance_map(image: &HdrImage, viewer: &Viewer) -> Result<Vec<f32>> {
             } else {
                 EQUAL_ENERGY_SP_RATIO as f32
             };
-            let (cone, rod) = adaptation.gains_at(global, start + j);
+            let (cone, rod) = adaptation.gains_at(global, local.as_ref(), start + j);
             *o = 1.0 / pool_f32(cone, rod * ratio);
         }
         0
@@ -708,18 +798,11 @@ mod tests {
         ] {
             assert!(bad.validate().is_err(), "{bad:?}");
         }
-        let short = [1.0f32; 3];
-        let local = Adaptation::Local {
-            adaptation_cd_m2: &short,
-            adaptation_scotopic_cd_m2: &short,
-        };
+        let map = AdaptationMap::from_levels(3, 1, &[1.0; 3], &[2.0; 3]).unwrap();
+        let local = Adaptation::Local(&map);
         assert!(local.validate(4).is_err());
         assert!(local.validate(3).is_ok());
-        let nan = [f32::NAN; 3];
-        let local = Adaptation::Local {
-            adaptation_cd_m2: &short,
-            adaptation_scotopic_cd_m2: &nan,
-        };
-        assert!(local.validate(3).is_err());
+        assert!(AdaptationMap::from_levels(3, 1, &[1.0; 3], &[f32::NAN; 3]).is_err());
+        assert!(AdaptationMap::from_levels(3, 1, &[1.0; 2], &[1.0; 3]).is_err());
     }
 }

@@ -335,3 +335,77 @@ fn no_halo_at_a_1000_to_1_edge() {
     let g = run(&img, &ViewingConditions::default());
     assert!(display_cd_m2(&g.image, h / 2 * w + far) < 0.5);
 }
+
+#[test]
+fn visibility_uses_the_same_local_map() {
+    use visadapt::visibility::{Observation, difference, tolerance_map};
+    // A uniform image: the local observer is the global one, to the bit.
+    let mut flat = HdrImage::zeros(64, 48);
+    for i in 0..flat.len() {
+        grey(&mut flat, i, 0.3);
+    }
+    let mut test = flat.clone();
+    for i in (0..test.len()).filter(|i| i % 64 < 20) {
+        grey(&mut test, i, 0.33);
+    }
+    let g = Observation::for_image(&flat, &ViewingConditions::default()).unwrap();
+    let l = Observation::for_image(&flat, &local(1.0)).unwrap();
+    assert!(g.map.is_none() && l.map.is_some());
+    assert_eq!(
+        tolerance_map(&flat, &g.viewer()).unwrap(),
+        tolerance_map(&flat, &l.viewer()).unwrap()
+    );
+    let (dg, dl) = (
+        difference(&flat, &test, &g.viewer()).unwrap(),
+        difference(&flat, &test, &l.viewer()).unwrap(),
+    );
+    assert_eq!(dg.jnd, dl.jnd);
+
+    // Daylight: the global tolerance is one constant (k = 0, one cone threshold) while the
+    // local one follows each region's own threshold, far lower in the shadows.
+    let img = sunset();
+    let cond = ViewingConditions {
+        acuity: false,
+        ..local(1.0)
+    };
+    let g = Observation::for_image(
+        &img,
+        &ViewingConditions {
+            adaptation: AdaptationMode::Global,
+            ..cond.clone()
+        },
+    )
+    .unwrap();
+    let l = Observation::for_image(&img, &cond).unwrap();
+    let tg = tolerance_map(&img, &g.viewer()).unwrap();
+    let tl = tolerance_map(&img, &l.viewer()).unwrap();
+    let lit: Vec<usize> = (0..img.len()).filter(|&i| img.y[i] > 0.0).collect();
+    let (lo, hi) = lit.iter().fold((f32::INFINITY, 0f32), |(lo, hi), &i| {
+        (lo.min(tg[i]), hi.max(tg[i]))
+    });
+    assert!(hi / lo < 1.001, "global tolerance varies: {lo}..{hi}");
+    let map = l.map.as_ref().unwrap();
+    let mut ratios: Vec<f32> = lit.iter().map(|&i| tl[i] / tg[i]).collect();
+    ratios.sort_by(f32::total_cmp);
+    let median = ratios[ratios.len() / 2];
+    eprintln!(
+        "sunset tolerance, local / global: median {median:.4}, range {:.4}..{:.4}",
+        ratios[0],
+        ratios[ratios.len() - 1]
+    );
+    assert!(median < 0.1, "{median}");
+    // Each pixel's local tolerance is the Eq. 4 threshold of its own local adaptation
+    // (daylight: k = 0 wherever the local level is photopic).
+    for &i in lit.iter().step_by(997) {
+        let la = map.adaptation_cd_m2(i);
+        let las = map.adaptation_scotopic_cd_m2(i);
+        if visadapt::mesopic::rod_weight(las) == 0.0 {
+            let want = visadapt::tvi::cone_threshold_cd_m2(la);
+            assert!(
+                (f64::from(tl[i]) / want - 1.0).abs() < 1e-4,
+                "pixel {i}: {} vs {want}",
+                tl[i]
+            );
+        }
+    }
+}

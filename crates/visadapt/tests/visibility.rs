@@ -2,6 +2,7 @@
 
 mod common;
 
+use visadapt::local::AdaptationMap;
 use visadapt::operator::ViewingConditions;
 use visadapt::visibility::{Adaptation, Sensitivity, Viewer, converged, difference, tolerance_map};
 use visadapt::{HdrImage, Limits, Projection, View, io};
@@ -489,25 +490,15 @@ fn per_pixel_adaptation_maps() {
     let n = image.len();
     let flat = vec![report.world_adaptation_cd_m2 as f32; n];
     let flat_s = vec![report.world_adaptation_scotopic_cd_m2 as f32; n];
-    let local = Viewer {
-        adaptation: Adaptation::Local {
-            adaptation_cd_m2: &flat,
-            adaptation_scotopic_cd_m2: &flat_s,
-        },
-        acuity_sigma_px: 0.0,
-    };
+    let flat_map = AdaptationMap::from_levels(48, 48, &flat, &flat_s).unwrap();
+    let local = Viewer::local(&flat_map);
     let g = tolerance_map(&image, &viewer).unwrap();
     let l = tolerance_map(&image, &local).unwrap();
     assert!(g.iter().zip(&l).all(|(a, b)| (a / b - 1.0).abs() < 1e-5));
 
     let own_s = image.scotopic.clone().unwrap();
-    let own = Viewer {
-        adaptation: Adaptation::Local {
-            adaptation_cd_m2: &image.y,
-            adaptation_scotopic_cd_m2: &own_s,
-        },
-        acuity_sigma_px: 0.0,
-    };
+    let own_map = AdaptationMap::from_levels(48, 48, &image.y, &own_s).unwrap();
+    let own = Viewer::local(&own_map);
     let t = tolerance_map(&image, &own).unwrap();
     for (i, (t, y)) in t.iter().zip(&image.y).enumerate() {
         // Every pixel is at 700 cd/m² or more: cone Weber branch, 10^-1.255 = 5.559 %.
@@ -515,14 +506,8 @@ fn per_pixel_adaptation_maps() {
         assert!((weber - 0.055_59).abs() < 1e-4, "pixel {i}: {weber}");
     }
     // A map of the wrong size is refused.
-    let short = Viewer {
-        adaptation: Adaptation::Local {
-            adaptation_cd_m2: &flat[1..],
-            adaptation_scotopic_cd_m2: &flat_s[1..],
-        },
-        acuity_sigma_px: 0.0,
-    };
-    assert!(tolerance_map(&image, &short).is_err());
+    let short_map = AdaptationMap::from_levels(47, 48, &flat[48..], &flat_s[48..]).unwrap();
+    assert!(tolerance_map(&image, &Viewer::local(&short_map)).is_err());
 }
 
 /// NaN and infinite pixels read as black, as the operator shows them, and are counted.

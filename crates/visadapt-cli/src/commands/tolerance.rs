@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use std::path::Path;
 use visadapt::io;
 use visadapt::operator::{Source, ViewingConditions};
-use visadapt::visibility::{self, ToleranceSummary, Viewer};
+use visadapt::visibility::{self, Observation, ToleranceSummary};
 
 pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
@@ -39,7 +39,8 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     if scale != 1.0 {
         image.scale(scale as f32);
     }
-    let (viewer, report) = Viewer::for_image(&image, &conditions)?;
+    let observation = Observation::for_image(&image, &conditions)?;
+    let (viewer, report) = (observation.viewer(), &observation.report);
     let tolerance = visibility::tolerance_map(&image, &viewer)?;
 
     let summary = ToleranceSummary::of(&tolerance, &image.y)

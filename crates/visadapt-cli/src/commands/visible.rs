@@ -11,7 +11,7 @@ use std::path::Path;
 use visadapt::HdrImage;
 use visadapt::io;
 use visadapt::operator::{Report, ViewingConditions};
-use visadapt::visibility::{self, Difference, Viewer};
+use visadapt::visibility::{self, Difference, Observation};
 
 pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
@@ -53,7 +53,8 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
         view: args.view.view(reference.width, reference.height),
         ..conditions
     };
-    let (viewer, report) = Viewer::for_image(&reference, &conditions)?;
+    let observation = Observation::for_image(&reference, &conditions)?;
+    let (viewer, report) = (observation.viewer(), &observation.report);
     let d = visibility::difference(&reference, &test, &viewer)?;
     if d.non_finite_pixels > 0 {
         log::warn!(

@@ -154,6 +154,64 @@ impl AdaptationMap {
         self.world_adaptation_scotopic_cd_m2 * 10f64.powf(f64::from(self.offset_scotopic_log[i]))
     }
 
+    /// A map of given levels: per pixel the photopic (cd/m²) and scotopic (scotopic cd/m²)
+    /// adaptation luminances, finite and non-negative (values below [`FLOOR_CD_M2`] read as
+    /// it), without acuity sigmas. The offsets are from 1 cd/m².
+    pub fn from_levels(
+        width: usize,
+        height: usize,
+        adaptation_cd_m2: &[f32],
+        adaptation_scotopic_cd_m2: &[f32],
+    ) -> Result<Self> {
+        let n = width * height;
+        let mut offsets = Vec::with_capacity(2);
+        for (name, map) in [
+            ("adaptation map", adaptation_cd_m2),
+            ("scotopic adaptation map", adaptation_scotopic_cd_m2),
+        ] {
+            if map.len() != n {
+                return Err(Error::invalid(
+                    name,
+                    format!("of {} values", map.len()),
+                    format!("must hold one value per pixel ({n})"),
+                ));
+            }
+            if let Some(v) = map.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+                return Err(Error::invalid(
+                    name,
+                    v,
+                    "values must be finite, non-negative luminances",
+                ));
+            }
+            let o: Vec<f32> = map
+                .iter()
+                .map(|&v| f64::from(v.max(FLOOR_CD_M2)).log10() as f32)
+                .collect();
+            offsets.push(o);
+        }
+        let offset_scotopic_log = offsets.pop().expect("two maps");
+        let offset_log = offsets.pop().expect("two maps");
+        Ok(AdaptationMap {
+            width,
+            height,
+            offset_log,
+            offset_scotopic_log,
+            acuity_sigma_px: None,
+            world_adaptation_cd_m2: 1.0,
+            world_adaptation_scotopic_cd_m2: 1.0,
+            radius_deg: f64::NAN,
+            grid_step_px: 0,
+            grid: Grid {
+                width: 0,
+                height: 0,
+                guide_log: Vec::new(),
+                offset_log: Vec::new(),
+                offset_scotopic_log: Vec::new(),
+                pixels_per_degree: Vec::new(),
+            },
+        })
+    }
+
     /// The map of `image` for a neighbourhood of `radius_deg` degrees (positive; `+∞` for
     /// the global limit), anchored to the world adaptation of `report` (the
     /// [`operator::plan`](crate::operator::plan) of the same image) with its hot-pixel

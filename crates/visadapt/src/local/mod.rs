@@ -67,9 +67,8 @@ pub mod map;
 
 pub use map::AdaptationMap;
 
-use crate::colour::xyz_to_linear_srgb_matrix;
 use crate::mesopic::rod_weight;
-use crate::operator::{self, PixelStats, Report};
+use crate::operator::{self, Mapping, PixelStats, Report};
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic;
 use crate::{DisplayImage, Error, HdrImage, Result};
@@ -124,14 +123,14 @@ impl LocalAdaptation {
 
 /// One tabulated coefficient set: values at nodes `start + j/TABLE_STEPS_PER_LOG_UNIT`.
 #[derive(Debug, Clone, PartialEq)]
-struct Table<const K: usize> {
+pub(crate) struct Table<const K: usize> {
     start: f32,
     values: Vec<[f32; K]>,
 }
 
 impl<const K: usize> Table<K> {
     /// Nodes covering `min..=max` (and 0), each `f(offset)`.
-    fn new(min: f32, max: f32, f: impl Fn(f64) -> [f32; K]) -> Self {
+    pub(crate) fn new(min: f32, max: f32, f: impl Fn(f64) -> [f32; K]) -> Self {
         let steps = TABLE_STEPS_PER_LOG_UNIT;
         let below = (-min.min(0.0) * steps).ceil();
         let above = (max.max(0.0) * steps).ceil();
@@ -147,7 +146,7 @@ impl<const K: usize> Table<K> {
 
     /// Linear interpolation at `offset` (clamped to the table).
     #[inline(always)]
-    fn at(&self, offset: f32) -> [f32; K] {
+    pub(crate) fn at(&self, offset: f32) -> [f32; K] {
         let last = self.values.len() - 2;
         let p = ((offset - self.start) * TABLE_STEPS_PER_LOG_UNIT).clamp(0.0, last as f32 + 1.0);
         let i = (p as usize).min(last);
@@ -173,12 +172,13 @@ pub struct LocalMapping {
 }
 
 impl LocalMapping {
-    /// Tables for `map`, with `cone(L) = (m_p, b_p)` for a cone adaptation luminance `L`
+    /// Tables for `map` and the display and colour of the `global` mapping, with
+    /// `cone(L) = (m_p, b_p)` for a cone adaptation luminance `L`
     /// (cd/m²) and `rod(L_s) = (m_s, b_s)` for a rod adaptation `L_s` (scotopic cd/m²), in
     /// display cd/m² per world unit and display cd/m²; `k` is Eq. 6 at `L_s`.
     pub fn new(
         map: &AdaptationMap,
-        display_max_cd_m2: f64,
+        global: &Mapping,
         rod_saturation: bool,
         cone: impl Fn(f64) -> (f64, f64),
         rod: impl Fn(f64) -> (f64, f64),
@@ -189,7 +189,7 @@ impl LocalMapping {
         };
         let (lp, hp) = range(&map.offset_log);
         let (ls, hs) = range(&map.offset_scotopic_log);
-        let xyz2rgb = xyz_to_linear_srgb_matrix();
+        let display_max_cd_m2 = global.display_max_cd_m2;
         let (lwa, lwa_s) = (
             map.world_adaptation_cd_m2,
             map.world_adaptation_scotopic_cd_m2,
@@ -197,12 +197,10 @@ impl LocalMapping {
         let cone = Table::new(lp, hp, |d| {
             // `10^0` is exactly 1, so offset 0 is the global level exactly.
             let (m, b) = cone(lwa * 10f64.powf(d));
-            let s = m / display_max_cd_m2;
+            let rows = operator::cone_rows(global, m);
             let mut out = [0f32; 10];
-            for (r, row) in xyz2rgb.iter().enumerate() {
-                for (c, v) in row.iter().enumerate() {
-                    out[3 * r + c] = (v * s) as f32;
-                }
+            for (r, row) in rows.iter().enumerate() {
+                out[3 * r..3 * r + 3].copy_from_slice(row);
             }
             out[9] = (b / display_max_cd_m2) as f32;
             out
@@ -230,7 +228,7 @@ impl LocalMapping {
         let lda = report.display_adaptation_cd_m2;
         LocalMapping::new(
             map,
-            report.mapping.display_max_cd_m2,
+            &report.mapping,
             rod_saturation,
             |l| (photopic_scale(l, lda), 0.0),
             |l| (scotopic_scale(l, lda), 0.0),
@@ -254,7 +252,7 @@ impl LocalMapping {
         let rod_floor = 10f64.powf(crate::tvi::ROD_FLOOR_LOG);
         LocalMapping::new(
             map,
-            report.mapping.display_max_cd_m2,
+            &report.mapping,
             rod_saturation,
             |l| {
                 let t = (crate::tvi::cone_threshold_cd_m2(l) * cone_excess).max(cone_floor);
