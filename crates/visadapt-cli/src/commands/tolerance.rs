@@ -50,7 +50,7 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     let given = report.world_adaptation_source == Source::Caller;
     if args.json {
         let output = args.output.display().to_string();
-        let v = visadapt::report::tolerance_json(&summary, &report, scale, Some(&output));
+        let v = visadapt::report::tolerance_json(&summary, report, scale, Some(&output));
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(

@@ -77,10 +77,10 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
 
     if args.json {
         let map = args.output.as_ref().map(|p| p.display().to_string());
-        let v = visadapt::report::difference_json(&d, &report, scale, map.as_deref());
+        let v = visadapt::report::difference_json(&d, report, scale, map.as_deref());
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        print!("{}", text_report(&d, &report));
+        print!("{}", text_report(&d, report));
         if let Some(out) = &args.output {
             println!("wrote                         {}", out.display());
         }
