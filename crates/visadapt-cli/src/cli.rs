@@ -155,7 +155,7 @@ pub struct AdaptationArgs {
 
     /// With --adaptation local: radius of the neighbourhood the eye adapts to, degrees
     /// (the fovea and its surround).
-    #[arg(long, allow_negative_numbers = true, value_name = "DEG",
+    #[arg(long, allow_negative_numbers = true, value_parser = positive, value_name = "DEG",
           default_value_t = visadapt::local::DEFAULT_ADAPTATION_RADIUS_DEG)]
     pub adaptation_radius: f64,
 }
