@@ -1,0 +1,105 @@
+//! Local adaptation against the global operator, in the same run (criterion, pixels/s):
+//!
+//! * `local_vs_global/global/WxH`: `plan` + `apply_into` with the acuity blur (the paper's
+//!   operator as a video loop runs it, buffers reused);
+//! * `local_vs_global/local/WxH`: `plan`, the adaptation map, the per-pixel tables and
+//!   `local::apply_into` with the per-pixel acuity blur, buffers reused;
+//! * `radius/R/1920x1080`: the local operator at radii of 0.25 to 16 degrees (its cost is
+//!   meant to be flat in the radius).
+//!
+//! The frame spans four log units (0.01 to 100 cd/m², a dusk scene), so the local levels,
+//! rod weights and blur sigmas vary over it, seen at 20 degrees as in the operator bench.
+//!
+//! `cargo bench -p visadapt --bench local -- --warm-up-time 1 --measurement-time 3`
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use std::hint::black_box;
+use visadapt::local::{self, LocalAdaptation, LocalMapping};
+use visadapt::operator::{AdaptationMode, ViewingConditions, apply_into, local_map, plan};
+use visadapt::{DisplayImage, HdrImage, View};
+
+/// Four log units left to right, a fine checker, a colour cast varying over the frame.
+fn frame(w: usize, h: usize) -> HdrImage {
+    let mut im = HdrImage::zeros(w, h);
+    for j in 0..h {
+        for i in 0..w {
+            let k = j * w + i;
+            let u = i as f32 / w as f32;
+            let v = j as f32 / h as f32;
+            let check = if (i / 4 + j / 4) % 2 == 0 { 1.0 } else { 0.3 };
+            let l = 100.0 * 10f32.powf(-4.0 * u) * (0.5 + 0.5 * v) * check;
+            im.x[k] = l * (0.8 + 0.3 * v);
+            im.y[k] = l;
+            im.z[k] = l * (1.2 - 0.4 * u);
+        }
+    }
+    im.absolute_units = true;
+    im
+}
+
+fn conditions(w: usize, h: usize, adaptation: AdaptationMode) -> ViewingConditions {
+    ViewingConditions {
+        acuity: true,
+        view: Some(View::perspective(20.0, w, h)),
+        adaptation,
+        ..ViewingConditions::default()
+    }
+}
+
+fn run_local(im: &HdrImage, cond: &ViewingConditions, out: &mut DisplayImage) {
+    let AdaptationMode::Local(options) = cond.adaptation else {
+        unreachable!("local conditions")
+    };
+    let report = plan(im, cond).expect("plan");
+    let map = local_map(im, &report, cond, &options).expect("map");
+    let mapping = LocalMapping::steady_state(&map, &report, options.rod_saturation);
+    black_box(local::apply_into(im, &map, &mapping, out));
+}
+
+fn bench(c: &mut Criterion) {
+    let local_mode = AdaptationMode::Local(LocalAdaptation::default());
+    let mut group = c.benchmark_group("local_vs_global");
+    group.sample_size(10);
+    for (w, h) in [(1920, 1080), (3840, 2160)] {
+        let im = frame(w, h);
+        let size = format!("{w}x{h}");
+        group.throughput(Throughput::Elements((w * h) as u64));
+        let global = conditions(w, h, AdaptationMode::Global);
+        let mut out = DisplayImage::default();
+        group.bench_function(BenchmarkId::new("global", &size), |b| {
+            b.iter(|| {
+                let r = plan(&im, &global).expect("plan");
+                black_box(apply_into(&im, &r.mapping, &mut out));
+            })
+        });
+        let local = conditions(w, h, local_mode);
+        group.bench_function(BenchmarkId::new("local", &size), |b| {
+            b.iter(|| run_local(&im, &local, &mut out))
+        });
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group("radius");
+    group.sample_size(10);
+    let (w, h) = (1920, 1080);
+    let im = frame(w, h);
+    group.throughput(Throughput::Elements((w * h) as u64));
+    let mut out = DisplayImage::default();
+    for radius in [0.25, 1.0, 4.0, 16.0] {
+        let cond = conditions(
+            w,
+            h,
+            AdaptationMode::Local(LocalAdaptation {
+                radius_deg: radius,
+                ..LocalAdaptation::default()
+            }),
+        );
+        group.bench_function(BenchmarkId::new(format!("{radius}"), "1920x1080"), |b| {
+            b.iter(|| run_local(&im, &cond, &mut out))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
