@@ -156,7 +156,7 @@ impl AdaptationMap {
 
     /// A map of given levels: per pixel the photopic (cd/m²) and scotopic (scotopic cd/m²)
     /// adaptation luminances, finite and non-negative (values below [`FLOOR_CD_M2`] read as
-    /// it), without acuity sigmas. The offsets are from 1 cd/m².
+    /// it), without acuity sigmas. The offsets are from the first pixel's levels.
     pub fn from_levels(
         width: usize,
         height: usize,
@@ -183,22 +183,24 @@ impl AdaptationMap {
                     "values must be finite, non-negative luminances",
                 ));
             }
+            // Offsets from the first pixel's level: a uniform map is exactly offset 0.
+            let anchor = f64::from(map.first().map_or(1.0, |v| v.max(FLOOR_CD_M2)));
             let o: Vec<f32> = map
                 .iter()
-                .map(|&v| f64::from(v.max(FLOOR_CD_M2)).log10() as f32)
+                .map(|&v| (f64::from(v.max(FLOOR_CD_M2)) / anchor).log10() as f32)
                 .collect();
-            offsets.push(o);
+            offsets.push((o, anchor));
         }
-        let offset_scotopic_log = offsets.pop().expect("two maps");
-        let offset_log = offsets.pop().expect("two maps");
+        let (offset_scotopic_log, anchor_s) = offsets.pop().expect("two maps");
+        let (offset_log, anchor) = offsets.pop().expect("two maps");
         Ok(AdaptationMap {
             width,
             height,
             offset_log,
             offset_scotopic_log,
             acuity_sigma_px: None,
-            world_adaptation_cd_m2: 1.0,
-            world_adaptation_scotopic_cd_m2: 1.0,
+            world_adaptation_cd_m2: anchor,
+            world_adaptation_scotopic_cd_m2: anchor_s,
             radius_deg: f64::NAN,
             grid_step_px: 0,
             grid: Grid {
