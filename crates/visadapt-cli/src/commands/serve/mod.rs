@@ -32,7 +32,6 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         acuity: conditions.acuity,
     };
     let viewer = viewer::Viewer::new(args.input.clone(), image, scale, conditions, defaults);
-    let app = api::router(Arc::new(Mutex::new(viewer)));
 
     // Two workers are plenty for one user's page; the model's own parallelism is rayon's.
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -45,6 +44,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
             .await
             .with_context(|| format!("cannot listen on {}:{}", args.host, args.port))?;
         let address = listener.local_addr()?;
+        let app = api::router(Arc::new(Mutex::new(viewer)), address.ip().is_loopback());
         if !address.ip().is_loopback() {
             log::warn!("listening on {address}: other machines can reach the viewer and the image");
         }
