@@ -67,6 +67,26 @@ impl Chromaticities {
     }
 }
 
+/// In place: linear (R, G, B) planes → CIE (X, Y, Z) planes through `m` (e.g.
+/// [`Chromaticities::rgb_to_xyz`]), times `scale`, in `f64`. Results beyond the `f32`
+/// range saturate to ±`f32::MAX`; NaN and infinities pass through.
+pub fn rgb_planes_to_xyz(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
+    let saturate = |v: f64| {
+        if v.is_finite() {
+            v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
+        } else {
+            v as f32
+        }
+    };
+    let m: Vec<f64> = m.iter().flatten().map(|v| v * scale).collect();
+    for ((pr, pg), pb) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
+        let (cr, cg, cb) = (f64::from(*pr), f64::from(*pg), f64::from(*pb));
+        *pr = saturate(m[0] * cr + m[1] * cg + m[2] * cb);
+        *pg = saturate(m[3] * cr + m[4] * cg + m[5] * cb);
+        *pb = saturate(m[6] * cr + m[7] * cg + m[8] * cb);
+    }
+}
+
 /// The inverse of a 3×3 matrix, `None` if it is (nearly) singular.
 pub fn invert(m: &Mat3) -> Option<Mat3> {
     let c = |r: usize, s: usize| {

@@ -11,9 +11,10 @@
 //! Available with the `json` feature (on by default).
 
 use crate::Projection;
+use crate::acuity::snellen;
 use crate::observer::Observer;
-use crate::operator::{PixelStats, Report, Source};
-use crate::timecourse::Moment;
+use crate::operator::{Mapping, PixelStats, Report, Source};
+use crate::timecourse::{Adaptation, Moment};
 use crate::visibility::{Difference, POOLING_EXPONENT, ToleranceSummary};
 use serde_json::{Value, json};
 
@@ -130,6 +131,63 @@ pub fn moment_json(m: &Moment) -> Value {
         "scotopic_offset_cd_m2": map.scotopic_offset_cd_m2,
         "acuity_cycles_per_degree": m.acuity_cycles_per_degree,
     })
+}
+
+/// The state of an adapting observer ([`Adaptation`], Sec. 3.5): the world luminances it
+/// is exposed to, the current thresholds and their log10 excess over the steady state
+/// (Eq. 4, 5), the current acuity, the seconds since the world last changed and whether
+/// the adaptation is complete.
+pub fn adaptation_json(a: &Adaptation) -> Value {
+    json!({
+        "world_adaptation_cd_m2": a.world_cd_m2(),
+        "world_adaptation_scotopic_cd_m2": a.world_scotopic_cd_m2(),
+        "seconds_since_change": a.seconds_since_change(),
+        "adapted": a.is_adapted(),
+        "cone_threshold_cd_m2": a.cone_threshold_cd_m2(),
+        "rod_threshold_scotopic_cd_m2": a.rod_threshold_scotopic_cd_m2(),
+        "cone_excess_log": a.cone_excess_log(),
+        "rod_excess_log": a.rod_excess_log(),
+        "acuity_cycles_per_degree": a.acuity_cycles_per_degree(),
+    })
+}
+
+/// The report of an image mapped for an adapting observer: [`map_json`] of the
+/// steady-state `report` of the frame, with the thresholds, scale factors, rod weight and
+/// acuity of `state` and its Eq. 8–9 `mapping` (from [`Adaptation::mapping`]), plus the
+/// offsets (`offset_cd_m2` = `b_p + k·b_s`, `photopic_offset_cd_m2`,
+/// `scotopic_offset_cd_m2`, display cd/m²), `cone_excess_log`, `rod_excess_log` and
+/// `seconds_since_change`. Once the adaptation is complete it equals [`map_json`] plus
+/// zero offsets and excesses.
+pub fn adapting_map_json(
+    report: &Report,
+    stats: &PixelStats,
+    input_scale: f64,
+    state: &Adaptation,
+    mapping: &Mapping,
+) -> Value {
+    let now = Report {
+        mapping: *mapping,
+        cone_threshold_cd_m2: state.cone_threshold_cd_m2(),
+        rod_threshold_scotopic_cd_m2: state.rod_threshold_scotopic_cd_m2(),
+        ..report.clone()
+    };
+    let mut v = map_json(&now, stats, input_scale);
+    let acuity = state.acuity_cycles_per_degree();
+    let extra = json!({
+        "acuity_cycles_per_degree": acuity,
+        "snellen": snellen(acuity),
+        "cone_excess_log": state.cone_excess_log(),
+        "rod_excess_log": state.rod_excess_log(),
+        "seconds_since_change": state.seconds_since_change(),
+        "offset_cd_m2": mapping.photopic_offset_cd_m2
+            + mapping.rod_weight * mapping.scotopic_offset_cd_m2,
+        "photopic_offset_cd_m2": mapping.photopic_offset_cd_m2,
+        "scotopic_offset_cd_m2": mapping.scotopic_offset_cd_m2,
+    });
+    if let (Value::Object(v), Value::Object(extra)) = (&mut v, extra) {
+        v.extend(extra);
+    }
+    v
 }
 
 /// A whole time course (`visadapt timecourse --json`): one [`moment_json`] per time.

@@ -825,7 +825,7 @@ fn to_hdr(
                     .unwrap_or_else(|| vec![0.0; n])
             };
             let (mut pr, mut pg, mut pb) = (take(r), take(g), take(b));
-            rgb_planes_to_xyz(&m, scale, &mut pr, &mut pg, &mut pb);
+            colour::rgb_planes_to_xyz(&m, scale, &mut pr, &mut pg, &mut pb);
             (image.x, image.y, image.z) = (pr, pg, pb);
         }
         Layout::Yca { ry, by, .. } => {
@@ -857,7 +857,7 @@ fn to_hdr(
                 // Reuse the planes: r ← R, l ← G, b ← B.
                 (*r, *l, *b) = (red as f32, green as f32, blue as f32);
             }
-            rgb_planes_to_xyz(&m, scale, &mut cr, &mut lum, &mut cb);
+            colour::rgb_planes_to_xyz(&m, scale, &mut cr, &mut lum, &mut cb);
             (image.x, image.y, image.z) = (cr, lum, cb);
         }
     }
@@ -865,17 +865,6 @@ fn to_hdr(
         .check_consistent()
         .map_err(|_| invalid("inconsistent planes"))?;
     Ok(image)
-}
-
-/// In place: (R, G, B) planes → (X, Y, Z) planes, times `scale`.
-fn rgb_planes_to_xyz(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
-    let m: Vec<f64> = m.iter().flatten().map(|v| v * scale).collect();
-    for ((pr, pg), pb) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
-        let (cr, cg, cb) = (f64::from(*pr), f64::from(*pg), f64::from(*pb));
-        *pr = saturate(m[0] * cr + m[1] * cg + m[2] * cb);
-        *pg = saturate(m[3] * cr + m[4] * cg + m[5] * cb);
-        *pb = saturate(m[6] * cr + m[7] * cg + m[8] * cb);
-    }
 }
 
 // ------------------------------------------------------------------------------------------
