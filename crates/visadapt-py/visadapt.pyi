@@ -9,6 +9,7 @@ from typing import Any, Dict, List, Literal, Optional, Sequence, Tuple, TypedDic
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import Unpack
 
 __version__: str
 
@@ -34,6 +35,28 @@ class ViewDict(TypedDict, total=False):
 Chromaticities = Tuple[
     Tuple[float, float], Tuple[float, float], Tuple[float, float], Tuple[float, float]
 ]
+
+class Conditions(TypedDict, total=False):
+    """The viewing conditions every mapping function takes as keywords (None: the default)."""
+
+    peak: Optional[float]
+    """Rescale the image so that its highest visible luminance is this, cd/m² (excludes scale)."""
+    scale: Optional[float]
+    """Multiply the image by this to get cd/m²."""
+    display_max: float
+    """The display's maximum luminance L_dmax, cd/m² (default 80)."""
+    display_adaptation: Optional[float]
+    """The display observer's adaptation L_da, cd/m² (default display_max / 2)."""
+    world_adaptation: Optional[float]
+    """The world observer's cone adaptation L_wa, cd/m² (default half the highest visible)."""
+    scotopic_adaptation: Optional[float]
+    """The world observer's rod adaptation, scotopic cd/m²."""
+    hot_pixel_fraction: float
+    """Fraction of pixels allowed above the highest visible luminance (default 1e-3)."""
+    fov: Optional[float]
+    """Horizontal field of view of a perspective view, degrees (default the file's, else 60)."""
+    acuity: bool
+    """Apply the acuity blur, Eq. 7 (default True)."""
 
 class DecodeError(ValueError):
     """A file is not valid data of its format (truncated, corrupt or inconsistent)."""
@@ -109,16 +132,7 @@ def write(
 
 def map(
     image: HdrImage,
-    *,
-    peak: Optional[float] = None,
-    scale: Optional[float] = None,
-    display_max: float = 80.0,
-    display_adaptation: Optional[float] = None,
-    world_adaptation: Optional[float] = None,
-    scotopic_adaptation: Optional[float] = None,
-    hot_pixel_fraction: float = 1e-3,
-    fov: Optional[float] = None,
-    acuity: bool = True,
+    **conditions: Unpack[Conditions],
 ) -> Tuple[Float32, Report]:
     """Map an image for display as the observer adapted to it sees it.
 
@@ -139,31 +153,13 @@ def timecourse(
 def visible(
     reference: HdrImage,
     test: HdrImage,
-    *,
-    peak: Optional[float] = None,
-    scale: Optional[float] = None,
-    display_max: float = 80.0,
-    display_adaptation: Optional[float] = None,
-    world_adaptation: Optional[float] = None,
-    scotopic_adaptation: Optional[float] = None,
-    hot_pixel_fraction: float = 1e-3,
-    fov: Optional[float] = None,
-    acuity: bool = True,
+    **conditions: Unpack[Conditions],
 ) -> Tuple[Float32, Report]:
     """JNDs per pixel between two images (H x W float32) and the `visible --json` summary."""
 
 def tolerance(
     image: HdrImage,
-    *,
-    peak: Optional[float] = None,
-    scale: Optional[float] = None,
-    display_max: float = 80.0,
-    display_adaptation: Optional[float] = None,
-    world_adaptation: Optional[float] = None,
-    scotopic_adaptation: Optional[float] = None,
-    hot_pixel_fraction: float = 1e-3,
-    fov: Optional[float] = None,
-    acuity: bool = True,
+    **conditions: Unpack[Conditions],
 ) -> Tuple[Float32, Report]:
     """The invisible luminance error per pixel (H x W float32, cd/m²) and the `tolerance --json` summary."""
 
@@ -176,7 +172,7 @@ class Adaptation:
         self,
         dt_seconds: float,
         target: Union[HdrImage, Report, float, Tuple[float, float]],
-        **conditions: Any,
+        **conditions: Unpack[Conditions],
     ) -> None:
         """View the current world for `dt_seconds`, then switch to `target`'s luminance."""
     def thresholds(self) -> Report:
@@ -184,15 +180,6 @@ class Adaptation:
     def map(
         self,
         image: HdrImage,
-        *,
-        peak: Optional[float] = None,
-        scale: Optional[float] = None,
-        display_max: float = 80.0,
-        display_adaptation: Optional[float] = None,
-        world_adaptation: Optional[float] = None,
-        scotopic_adaptation: Optional[float] = None,
-        hot_pixel_fraction: float = 1e-3,
-        fov: Optional[float] = None,
-        acuity: bool = True,
+        **conditions: Unpack[Conditions],
     ) -> Tuple[Float32, Report]:
         """`map` with the current (not steady-state) thresholds, Eq. 8-9."""

@@ -5,7 +5,6 @@ use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::borrow::Cow;
-use visadapt::adaptation::highest_visible;
 use visadapt::operator::ViewingConditions;
 use visadapt::{Error, HdrImage, View};
 
@@ -74,7 +73,7 @@ impl Options {
     }
 
     /// Check every value before any pixel is touched.
-    pub fn validate(&self) -> visadapt::Result<()> {
+    fn validate(&self) -> visadapt::Result<()> {
         let positive = |name, v: Option<f64>| match v {
             Some(v) if !(v.is_finite() && v > 0.0) => {
                 Err(Error::invalid(name, v, "must be a positive, finite number"))
@@ -95,38 +94,42 @@ impl Options {
     }
 
     /// The factor that turns `image`'s values into cd/m²: `scale`, or `peak` over its highest
-    /// visible luminance, or 1.
+    /// visible luminance ([`HdrImage::peak_factor`]), or 1.
     pub fn input_scale(&self, image: &HdrImage) -> visadapt::Result<f64> {
-        Ok(match (self.scale, self.peak) {
-            (Some(s), _) => s,
-            (None, Some(peak)) => {
-                let hv = f64::from(highest_visible(
-                    &image.y,
-                    self.conditions.hot_pixel_fraction,
-                ));
-                if hv.is_nan() || hv <= 0.0 {
-                    return Err(Error::invalid(
-                        "peak",
-                        peak,
-                        "the image has no visible luminance to rescale",
-                    ));
-                }
-                peak / hv
-            }
-            (None, None) => 1.0,
-        })
+        match (self.scale, self.peak) {
+            (Some(s), _) => Ok(s),
+            (None, Some(peak)) => image.peak_factor(peak, self.conditions.hot_pixel_fraction),
+            (None, None) => Ok(1.0),
+        }
     }
 
-    /// The viewing conditions for an image of this size (the `fov` becomes a perspective
-    /// view).
-    pub fn conditions_for(&self, image: &HdrImage) -> ViewingConditions {
-        ViewingConditions {
+    /// Check the options, bring `image` to cd/m² and give the viewing conditions for it
+    /// (the `fov` becomes a perspective view of its size).
+    pub fn prepare<'a>(&self, image: &'a HdrImage) -> visadapt::Result<Prepared<'a>> {
+        self.validate()?;
+        let scale = self.input_scale(image)?;
+        let image = scaled(image, scale);
+        let conditions = ViewingConditions {
             view: self
                 .fov_deg
                 .map(|fov| View::perspective(fov, image.width, image.height)),
             ..self.conditions.clone()
-        }
+        };
+        Ok(Prepared {
+            image,
+            conditions,
+            scale,
+        })
     }
+}
+
+/// An image in cd/m² with the conditions to view it under.
+pub struct Prepared<'a> {
+    /// The image, scaled (a copy) or as given.
+    pub image: Cow<'a, HdrImage>,
+    pub conditions: ViewingConditions,
+    /// The factor applied to the caller's values.
+    pub scale: f64,
 }
 
 /// `image` multiplied by `scale` (borrowed when the scale is 1: the caller's image is never

@@ -79,11 +79,9 @@ pub fn map<'py>(
 ) -> PyResult<(Display<'py>, Bound<'py, PyAny>)> {
     let options = Options::parse("map", conditions)?;
     let (display, report) = detached(py, || {
-        options.validate().map_err(lib_err)?;
-        let scale = options.input_scale(&image.inner).map_err(lib_err)?;
-        let image = scaled(&image.inner, scale);
-        let out = operator::map(&image, &options.conditions_for(&image)).map_err(lib_err)?;
-        let report = report::map_json(&out.report, &out.stats, scale);
+        let p = options.prepare(&image.inner).map_err(lib_err)?;
+        let out = operator::map(&p.image, &p.conditions).map_err(lib_err)?;
+        let report = report::map_json(&out.report, &out.stats, p.scale);
         Ok((Interleaved::of(&out.image), report))
     })?;
     Ok((display.into_array(py)?, json_to_py(py, &report)?))
@@ -159,13 +157,11 @@ pub fn visible<'py>(
 ) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyAny>)> {
     let options = Options::parse("visible", conditions)?;
     let (d, summary) = detached(py, || {
-        options.validate().map_err(lib_err)?;
-        let scale = options.input_scale(&reference.inner).map_err(lib_err)?;
-        let (reference, test) = (scaled(&reference.inner, scale), scaled(&test.inner, scale));
-        let (viewer, report) =
-            Viewer::for_image(&reference, &options.conditions_for(&reference)).map_err(lib_err)?;
-        let d = visibility::difference(&reference, &test, &viewer).map_err(lib_err)?;
-        let summary = report::difference_json(&d, &report, scale, None);
+        let p = options.prepare(&reference.inner).map_err(lib_err)?;
+        let test = scaled(&test.inner, p.scale);
+        let (viewer, report) = Viewer::for_image(&p.image, &p.conditions).map_err(lib_err)?;
+        let d = visibility::difference(&p.image, &test, &viewer).map_err(lib_err)?;
+        let summary = report::difference_json(&d, &report, p.scale, None);
         Ok((d, summary))
     })?;
     let jnd = to_array2(py, d.width, d.height, d.jnd)?;
@@ -192,14 +188,11 @@ pub fn tolerance<'py>(
     let options = Options::parse("tolerance", conditions)?;
     let (w, h) = (image.inner.width, image.inner.height);
     let (map, summary) = detached(py, || {
-        options.validate().map_err(lib_err)?;
-        let scale = options.input_scale(&image.inner).map_err(lib_err)?;
-        let image = scaled(&image.inner, scale);
-        let (viewer, report) =
-            Viewer::for_image(&image, &options.conditions_for(&image)).map_err(lib_err)?;
-        let map = visibility::tolerance_map(&image, &viewer).map_err(lib_err)?;
-        let summary = ToleranceSummary::of(&map, &image.y)
-            .map(|s| report::tolerance_json(&s, &report, scale, None))
+        let p = options.prepare(&image.inner).map_err(lib_err)?;
+        let (viewer, report) = Viewer::for_image(&p.image, &p.conditions).map_err(lib_err)?;
+        let map = visibility::tolerance_map(&p.image, &viewer).map_err(lib_err)?;
+        let summary = ToleranceSummary::of(&map, &p.image.y)
+            .map(|s| report::tolerance_json(&s, &report, p.scale, None))
             .ok_or_else(|| lib_err(visadapt::Error::invalid("image", "empty", "has no pixels")))?;
         Ok((map, summary))
     })?;
@@ -252,10 +245,8 @@ impl Adaptation {
             let options = Options::parse("step", conditions)?;
             let image = &image.get().inner;
             let report = detached(py, || {
-                options.validate().map_err(lib_err)?;
-                let scale = options.input_scale(image).map_err(lib_err)?;
-                let image = scaled(image, scale);
-                operator::plan(&image, &options.conditions_for(&image)).map_err(lib_err)
+                let p = options.prepare(image).map_err(lib_err)?;
+                operator::plan(&p.image, &p.conditions).map_err(lib_err)
             })?;
             (
                 report.world_adaptation_cd_m2,
@@ -311,14 +302,11 @@ impl Adaptation {
         let options = Options::parse("map", conditions)?;
         let state = &self.state;
         let (display, report) = detached(py, || {
-            options.validate().map_err(lib_err)?;
-            let scale = options.input_scale(&image.inner).map_err(lib_err)?;
-            let image = scaled(&image.inner, scale);
-            let steady =
-                operator::plan(&image, &options.conditions_for(&image)).map_err(lib_err)?;
+            let p = options.prepare(&image.inner).map_err(lib_err)?;
+            let steady = operator::plan(&p.image, &p.conditions).map_err(lib_err)?;
             let mapping = state.mapping(&steady);
-            let (display, stats) = operator::apply(&image, &mapping);
-            let report = report::adapting_map_json(&steady, &stats, scale, state, &mapping);
+            let (display, stats) = operator::apply(&p.image, &mapping);
+            let report = report::adapting_map_json(&steady, &stats, p.scale, state, &mapping);
             Ok((Interleaved::of(&display), report))
         })?;
         Ok((display.into_array(py)?, json_to_py(py, &report)?))

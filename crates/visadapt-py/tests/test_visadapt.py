@@ -395,3 +395,49 @@ def test_long_calls_release_the_gil():
     # With the GIL held the main thread would stall for a whole call; it never does.
     gaps = np.diff([span["start"], *inside, span["end"]])
     assert gaps.max() < 0.5 * duration / 3, f"longest stall {gaps.max():.3f} s of {duration:.3f} s"
+
+
+def stub_tree():
+    import ast
+
+    stub = Path(visadapt.__file__).with_name("__init__.pyi")
+    assert stub.is_file(), "the package ships its type stubs"
+    return ast.parse(stub.read_text())
+
+
+def test_stubs_and_docstrings_cover_the_api():
+    import ast
+
+    tree = stub_tree()
+    stubbed = {
+        n.name
+        for n in tree.body
+        if isinstance(n, (ast.FunctionDef, ast.ClassDef)) and n.name not in ("Conditions", "ViewDict")
+    }
+    import types
+
+    public = {
+        n
+        for n in dir(visadapt)
+        if not n.startswith("_") and not isinstance(getattr(visadapt, n), types.ModuleType)
+    }
+    assert stubbed == public
+    for name in public:
+        doc = getattr(visadapt, name).__doc__
+        assert doc and len(doc.strip()) > 20, name
+    for fn in ("map", "observer", "timecourse", "tolerance", "read", "chart", "write"):
+        assert "cd/m²" in getattr(visadapt, fn).__doc__, f"{fn}: no units in its docstring"
+
+
+def test_every_stubbed_condition_is_accepted():
+    import ast
+
+    tree = stub_tree()
+    conditions = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Conditions")
+    keys = [n.target.id for n in conditions.body if isinstance(n, ast.AnnAssign)]
+    assert "display_max" in keys and "fov" in keys
+    image = visadapt.chart(white=5)
+    for key in keys:
+        visadapt.map(image, **{key: None})  # None is the default of each
+    with pytest.raises(TypeError):
+        visadapt.map(image, not_a_condition=1)
