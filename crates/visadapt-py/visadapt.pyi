@@ -86,11 +86,14 @@ class HdrImage:
     def absolute_units(self) -> bool:
         """True when the values are known to be cd/m²."""
 
-def read(path: Path, max_pixels: Optional[int] = None) -> HdrImage:
+def read(
+    path: Path, max_pixels: Optional[int] = None, max_memory_bytes: Optional[int] = None
+) -> HdrImage:
     """Read a Radiance, OpenEXR or PFM file (format from its first bytes).
 
     Raises OSError (unreadable), DecodeError (corrupt), UnsupportedError (unknown format or
-    feature), ValueError (larger than max_pixels, default 2**28).
+    feature), ValueError (larger than max_pixels, default 2**28, or than the memory budget
+    max_memory_bytes, default 12 GiB).
     """
 
 def from_array(

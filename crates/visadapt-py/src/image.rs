@@ -169,6 +169,7 @@ fn wrap(inner: visadapt::HdrImage) -> PyResult<HdrImage> {
 ///     path: the file.
 ///     max_pixels: refuse images larger than this many pixels (default 2**28), before
 ///         anything is allocated.
+///     max_memory_bytes: memory budget for reading, bytes (default 12 GiB).
 ///
 /// Returns:
 ///     HdrImage: XYZ in cd/m² (see `HdrImage.absolute_units` for files without units).
@@ -177,13 +178,19 @@ fn wrap(inner: visadapt::HdrImage) -> PyResult<HdrImage> {
 ///     OSError: the file cannot be read.
 ///     DecodeError: the file is corrupt or truncated (UnsupportedError: a format or feature
 ///         visadapt does not read).
-///     ValueError: the image exceeds `max_pixels`.
+///     ValueError: the image exceeds `max_pixels` or `max_memory_bytes`.
 #[pyfunction]
-#[pyo3(signature = (path, max_pixels = None))]
-pub fn read(py: Python<'_>, path: PathBuf, max_pixels: Option<u64>) -> PyResult<HdrImage> {
-    let limits = match max_pixels {
-        Some(max_pixels) => Limits { max_pixels },
-        None => Limits::default(),
+#[pyo3(signature = (path, max_pixels = None, max_memory_bytes = None))]
+pub fn read(
+    py: Python<'_>,
+    path: PathBuf,
+    max_pixels: Option<u64>,
+    max_memory_bytes: Option<u64>,
+) -> PyResult<HdrImage> {
+    let defaults = Limits::default();
+    let limits = Limits {
+        max_pixels: max_pixels.unwrap_or(defaults.max_pixels),
+        max_memory_bytes: max_memory_bytes.unwrap_or(defaults.max_memory_bytes),
     };
     let image = detached(py, || {
         io::read(&path, &limits).map_err(|e| to_py(e, Some(&path)))

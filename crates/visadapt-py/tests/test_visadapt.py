@@ -304,6 +304,9 @@ def test_file_errors_are_os_and_decode_errors(tmp_path):
         visadapt.read(unknown)
     with pytest.raises(ValueError, match="exceeds the limit of 100 pixels"):
         visadapt.read(DATA / "GrayRampsHorizontal.exr", max_pixels=100)
+    with pytest.raises(ValueError) as e:
+        visadapt.read(DATA / "GrayRampsHorizontal.exr", max_memory_bytes=10_000)
+    assert not isinstance(e.value, visadapt.DecodeError), "a budget is not corrupt data"
     with pytest.raises(ValueError, match="cannot tell the output format"):
         visadapt.write(tmp_path / "out.bmp", np.zeros((2, 2, 3), np.float32))
     assert not (tmp_path / "out.bmp").exists()
