@@ -54,7 +54,9 @@ class Conditions(TypedDict, total=False):
     hot_pixel_fraction: float
     """Fraction of pixels allowed above the highest visible luminance (default 1e-3)."""
     fov: Optional[float]
-    """Horizontal field of view of a perspective view, degrees (default the file's, else 60)."""
+    """Horizontal field of view, degrees (default the file's view, else 60)."""
+    projection: Optional[Literal["perspective", "fisheye"]]
+    """The projection of `fov`: perspective (under 180 degrees, the default) or angular fisheye."""
     acuity: bool
     """Apply the acuity blur, Eq. 7 (default True)."""
 

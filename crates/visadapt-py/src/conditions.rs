@@ -1,12 +1,12 @@
 //! Keyword arguments to viewing conditions: one parser shared by `map`, `visible`,
 //! `tolerance` and `Adaptation`, so that every function takes the same names.
 
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::borrow::Cow;
 use visadapt::operator::ViewingConditions;
-use visadapt::{Error, HdrImage, View};
+use visadapt::{Error, HdrImage, Projection, View};
 
 /// The keyword arguments every function that maps an image accepts, with their meaning
 /// (the `.pyi` stubs and docstrings say the same).
@@ -18,7 +18,8 @@ pub const KEYWORDS: &[&str] = &[
     "world_adaptation",    // L_wa, cd/m²
     "scotopic_adaptation", // world rod adaptation, scotopic cd/m²
     "hot_pixel_fraction",  // fraction of pixels allowed above the highest visible luminance
-    "fov",                 // horizontal field of view of a perspective view, degrees
+    "fov",                 // horizontal field of view, degrees
+    "projection",          // of the fov: "perspective" (default) or "fisheye" (angular)
     "acuity",              // apply the acuity blur (Eq. 7)
 ];
 
@@ -28,6 +29,8 @@ pub struct Options {
     /// Everything but the view (it needs the image's size).
     pub conditions: ViewingConditions,
     pub fov_deg: Option<f64>,
+    /// The projection of `fov_deg`'s view (perspective or angular fisheye).
+    pub projection: Option<Projection>,
     pub scale: Option<f64>,
     pub peak: Option<f64>,
 }
@@ -39,6 +42,7 @@ impl Options {
         let mut o = Options {
             conditions: ViewingConditions::default(),
             fov_deg: None,
+            projection: None,
             scale: None,
             peak: None,
         };
@@ -66,6 +70,18 @@ impl Options {
                 "hot_pixel_fraction" => c.hot_pixel_fraction = value.extract()?,
                 "fov" => o.fov_deg = Some(value.extract()?),
                 "acuity" => c.acuity = value.extract()?,
+                "projection" => {
+                    let name: String = value.extract()?;
+                    o.projection = Some(match name.as_str() {
+                        "perspective" => Projection::Perspective,
+                        "fisheye" => Projection::AngularFisheye,
+                        _ => {
+                            return Err(PyValueError::new_err(format!(
+                                "invalid projection '{name}': perspective or fisheye"
+                            )));
+                        }
+                    })
+                }
                 _ => {} // checked against KEYWORDS above
             }
         }
@@ -83,6 +99,13 @@ impl Options {
         positive("scale", self.scale)?;
         positive("peak", self.peak)?;
         positive("fov", self.fov_deg)?;
+        if self.projection.is_some() && self.fov_deg.is_none() {
+            return Err(Error::invalid(
+                "projection",
+                "without fov",
+                "give the field of view (fov) it projects",
+            ));
+        }
         if self.scale.is_some() && self.peak.is_some() {
             return Err(Error::invalid(
                 "peak",
@@ -110,9 +133,12 @@ impl Options {
         let scale = self.input_scale(image)?;
         let image = scaled(image, scale);
         let conditions = ViewingConditions {
-            view: self
-                .fov_deg
-                .map(|fov| View::perspective(fov, image.width, image.height)),
+            view: self.fov_deg.map(|fov| match self.projection {
+                Some(Projection::AngularFisheye) => {
+                    View::angular_fisheye(fov, image.width, image.height)
+                }
+                _ => View::perspective(fov, image.width, image.height),
+            }),
             ..self.conditions.clone()
         };
         Ok(Prepared {

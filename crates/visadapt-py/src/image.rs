@@ -149,7 +149,10 @@ fn parse_view(obj: &Bound<'_, PyAny>, width: usize, height: usize) -> PyResult<V
                 })?
         }
     };
-    let mut view = View::perspective(fov, width, height);
+    let mut view = match projection {
+        Projection::AngularFisheye => View::angular_fisheye(fov, width, height),
+        _ => View::perspective(fov, width, height),
+    };
     view.projection = projection;
     if let Some(v) = d.get_item("vertical_fov_deg")? {
         view.vertical_deg = v.extract()?;

@@ -61,8 +61,9 @@ fn lib_err(e: visadapt::Error) -> PyErr {
 ///     scotopic_adaptation: the world observer's rod adaptation, scotopic cd/m².
 ///     hot_pixel_fraction: fraction of pixels allowed above the "highest visible"
 ///         luminance (default 1e-3).
-///     fov: horizontal field of view, degrees, of a perspective view (default: the file's
-///         view, else 60).
+///     fov: horizontal field of view, degrees (default: the file's view, else 60).
+///     projection: of `fov`: "perspective" (under 180 degrees, the default) or "fisheye"
+///         (angular fisheye, up to 360 degrees).
 ///     acuity: apply the acuity blur (default True).
 ///
 /// Returns:

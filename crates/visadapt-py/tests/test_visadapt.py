@@ -71,6 +71,11 @@ def map_cases():
             ["--peak", "0.05", "--fov", "40"],
             id="WideFloatRange-moonlight",
         ),
+        pytest.param(
+            DATA / "GrayRampsHorizontal.exr",
+            ["--scale", "0.01", "--fov", "200", "--projection", "fisheye", "--display-max", "120"],
+            id="GrayRamps-fisheye-dim",
+        ),
     ]
     if SHARED:
         cases += [
@@ -90,7 +95,11 @@ def kwargs_of(flags):
         if name == "no_acuity":
             out["acuity"] = False
         else:
-            out[name] = float(next(it))
+            value = next(it)
+            try:
+                out[name] = float(value)
+            except ValueError:
+                out[name] = value
     return out
 
 
@@ -277,6 +286,12 @@ def test_bad_parameters_raise_value_error_with_the_library_message():
         visadapt.map(image, hot_pixel_fraction=1.5)
     with pytest.raises(ValueError, match="either scale or peak"):
         visadapt.map(image, scale=2, peak=3)
+    with pytest.raises(ValueError, match="a perspective view spans less than 180"):
+        visadapt.map(image, fov=200)
+    with pytest.raises(ValueError, match="invalid projection 'fish'"):
+        visadapt.map(image, fov=200, projection="fish")
+    with pytest.raises(ValueError, match="give the field of view"):
+        visadapt.map(image, projection="fisheye")
     with pytest.raises(TypeError, match=r"map\(\) got an unexpected keyword argument 'fov_deg'"):
         visadapt.map(image, fov_deg=30)
     with pytest.raises(ValueError, match="invalid times"):
