@@ -371,11 +371,15 @@ fn parse_memory(s: &str) -> Result<u64, String> {
     }
 }
 
-/// A positive, finite number: luminances, factors, angles, rates.
+/// A positive, finite number: luminances, factors, angles, rates; at most
+/// [`visadapt::MAX_LUMINANCE_CD_M2`], the range the f32 pipeline carries.
 fn positive(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-        Ok(_) => Err("must be a positive, finite number".into()),
+        Ok(v) if v.is_finite() && v > 0.0 && v <= visadapt::MAX_LUMINANCE_CD_M2 => Ok(v),
+        Ok(_) => Err(format!(
+            "must be a positive number of at most {:e} (the range the f32 pipeline carries)",
+            visadapt::MAX_LUMINANCE_CD_M2
+        )),
         Err(_) => Err("not a number".into()),
     }
 }

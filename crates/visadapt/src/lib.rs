@@ -58,4 +58,4 @@ pub mod visibility;
 
 pub use error::{Error, LimitsExceeded, Result};
 pub use image::{DisplayImage, HdrImage, Projection, View};
-pub use limits::Limits;
+pub use limits::{Limits, MAX_LUMINANCE_CD_M2, check_factor, check_luminance};

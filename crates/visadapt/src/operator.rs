@@ -85,13 +85,7 @@ impl Default for ViewingConditions {
 impl ViewingConditions {
     /// Check every parameter's domain.
     pub fn validate(&self) -> Result<()> {
-        let positive = |name, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(Error::invalid(name, v, "must be a positive, finite number"))
-            }
-        };
+        let positive = |name, v: f64| crate::check_luminance(name, v).map(|_| ());
         positive("display-max", self.display_max_cd_m2)?;
         if let Some(v) = self.display_adaptation_cd_m2 {
             positive("display-adaptation", v)?;
@@ -226,7 +220,18 @@ pub struct PixelStats {
     pub negative: usize,
     /// Pixels brighter than the display can show, scaled down (see [`apply`]).
     pub clipped: usize,
+    /// Pixels so bright (more than [`MAX_DISPLAY_RELATIVE`] times the display maximum)
+    /// that they were scaled down, chromaticity kept, before the mapping and the blur, so
+    /// that the f32 arithmetic stays finite. Also counted in `clipped`.
+    pub saturated: usize,
 }
+
+/// Largest display-relative value (1 = `L_dmax`) a pixel may have before the blur: pixels
+/// beyond it are scaled down to it, chromaticity kept (counted in
+/// [`PixelStats::saturated`]). Our bound: 1e30 leaves 3e8 of headroom below `f32::MAX`
+/// for the blur's intermediate sums, and such a pixel is white after clipping either way;
+/// its blurred light reaches only where the acuity Gaussian's weight exceeds 1e-30.
+pub const MAX_DISPLAY_RELATIVE: f32 = 1e30;
 
 /// The operator's result.
 #[derive(Debug, Clone)]
@@ -375,18 +380,40 @@ struct Coefficients {
     rod: f32,
     /// `(b_p + k·b_s) / L_dmax`, added equally to R, G, B.
     offset: f32,
+    /// Largest input channel value (cd/m²) whose mapped value stays within
+    /// [`MAX_DISPLAY_RELATIVE`]: brighter pixels are scaled down to it first.
+    max_input: f32,
 }
 
 impl Coefficients {
     fn new(m: &Mapping) -> Self {
         let xyz2rgb = xyz_to_linear_srgb_matrix();
         let s = m.photopic_scale / m.display_max_cd_m2;
-        let cone = xyz2rgb.map(|row| row.map(|v| (v * s) as f32));
+        let bound = f64::from(MAX_DISPLAY_RELATIVE);
+        let clamp = |v: f64| v.clamp(-bound, bound);
+        let cone = xyz2rgb.map(|row| row.map(|v| clamp(v * s) as f32));
+        let rod = clamp(m.rod_weight * m.scotopic_scale / m.display_max_cd_m2);
+        let offset = clamp(
+            (m.photopic_offset_cd_m2 + m.rod_weight * m.scotopic_offset_cd_m2)
+                / m.display_max_cd_m2,
+        );
+        // The largest gain from a channel to an output: a row's absolute sum plus the rod
+        // coefficient (the scotopic estimate is at most about 2.3 Y + X + Z).
+        let gain = cone
+            .iter()
+            .map(|row| row.iter().map(|v| f64::from(v.abs())).sum::<f64>())
+            .fold(0.0, f64::max)
+            + 4.0 * rod.abs();
+        let max_input = if gain > 0.0 {
+            (bound / gain).min(f64::from(f32::MAX) / 4.0) as f32
+        } else {
+            f32::MAX / 4.0
+        };
         Coefficients {
             cone,
-            rod: (m.rod_weight * m.scotopic_scale / m.display_max_cd_m2) as f32,
-            offset: ((m.photopic_offset_cd_m2 + m.rod_weight * m.scotopic_offset_cd_m2)
-                / m.display_max_cd_m2) as f32,
+            rod: rod as f32,
+            offset: offset as f32,
+            max_input,
         }
     }
 }
@@ -458,6 +485,7 @@ fn par_chunks(
         non_finite: a.non_finite + b.non_finite,
         negative: a.negative + b.negative,
         clipped: a.clipped + b.clipped,
+        saturated: a.saturated + b.saturated,
     };
     #[cfg(feature = "rayon")]
     {
@@ -495,7 +523,7 @@ fn map_chunk(
         &image.y[start..end],
         &image.z[start..end],
     );
-    let (mut non_finite, mut negative) = (0u32, 0u32);
+    let (mut non_finite, mut negative, mut saturated) = (0u32, 0u32, 0u32);
     // Two copies of one branch-free loop (file scotopic channel, or the XYZ estimate), so
     // that the compiler vectorises each.
     let out = r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut());
@@ -503,17 +531,21 @@ fn map_chunk(
         Some(s) => {
             let xyzs = xs.iter().zip(ys).zip(zs).zip(&s[start..end]);
             for ((((x, y), z), s), ((r, g), b)) in xyzs.zip(out) {
-                let (finite, neg, [x, y, z, s]) = sanitize([*x, *y, *z, *s]);
+                let (finite, neg, v) = sanitize([*x, *y, *z, *s]);
+                let (sat, [x, y, z, s]) = c.saturate(v);
                 non_finite += u32::from(!finite);
                 negative += u32::from(neg);
+                saturated += u32::from(sat);
                 (*r, *g, *b) = c.pixel(x, y, z, s);
             }
         }
         None => {
             for (((x, y), z), ((r, g), b)) in xs.iter().zip(ys).zip(zs).zip(out) {
-                let (finite, neg, [x, y, z, _]) = sanitize([*x, *y, *z, 0.0]);
+                let (finite, neg, v) = sanitize([*x, *y, *z, 0.0]);
+                let (sat, [x, y, z, _]) = c.saturate(v);
                 non_finite += u32::from(!finite);
                 negative += u32::from(neg);
+                saturated += u32::from(sat);
                 (*r, *g, *b) = c.pixel(x, y, z, scotopic::from_xyz(x, y, z));
             }
         }
@@ -522,6 +554,7 @@ fn map_chunk(
         non_finite: non_finite as usize,
         negative: negative as usize,
         clipped: 0,
+        saturated: saturated as usize,
     }
 }
 
@@ -540,6 +573,16 @@ fn sanitize(v: [f32; 4]) -> (bool, bool, [f32; 4]) {
 }
 
 impl Coefficients {
+    /// Scale a (sanitised, non-negative) pixel down to [`Coefficients::max_input`] when a
+    /// channel exceeds it, keeping the ratios of its channels. Branch-free, to vectorise.
+    #[inline(always)]
+    fn saturate(&self, v: [f32; 4]) -> (bool, [f32; 4]) {
+        let m = v[0].max(v[1]).max(v[2]).max(v[3]);
+        let over = m > self.max_input;
+        let k = if over { self.max_input / m } else { 1.0 };
+        (over, v.map(|c| c * k))
+    }
+
     /// Eq. 6 in linear display RGB for one pixel.
     #[inline(always)]
     fn pixel(&self, x: f32, y: f32, z: f32, scotopic: f32) -> (f32, f32, f32) {

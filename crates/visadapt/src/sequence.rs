@@ -61,13 +61,7 @@ impl Sequence {
     /// finite times.
     pub fn new(from_cd_m2: f64, to_cd_m2: f64, times_seconds: Vec<f64>) -> Result<Self> {
         for (name, v) in [("from", from_cd_m2), ("to", to_cd_m2)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::invalid(
-                    name,
-                    v,
-                    "must be a positive, finite luminance",
-                ));
-            }
+            crate::check_luminance(name, v)?;
         }
         check_times(&times_seconds)?;
         Ok(Sequence {

@@ -617,13 +617,7 @@ pub fn course(
     display_max_cd_m2: f64,
 ) -> Result<Vec<Moment>> {
     check_times(times_seconds)?;
-    if !(display_max_cd_m2.is_finite() && display_max_cd_m2 > 0.0) {
-        return Err(Error::invalid(
-            "display-max",
-            display_max_cd_m2,
-            "must be a positive, finite number",
-        ));
-    }
+    crate::check_luminance("display-max", display_max_cd_m2)?;
     let lda = crate::adaptation::ADAPTATION_FRACTION * display_max_cd_m2;
     let mut eye = Adaptation::adapted(from.0, from.1)?;
     eye.step(0.0, to.0, to.1)?;

@@ -156,13 +156,7 @@ impl Sensitivity {
             ("cone-threshold", self.cone_threshold_cd_m2),
             ("rod-threshold", self.rod_threshold_scotopic_cd_m2),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::invalid(
-                    name,
-                    v,
-                    "must be a positive, finite luminance",
-                ));
-            }
+            crate::check_luminance(name, v)?;
         }
         if !(0.0..=1.0).contains(&self.rod_weight) {
             return Err(Error::invalid(

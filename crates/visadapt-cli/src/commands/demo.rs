@@ -32,9 +32,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         bail!("--levels: give at least one luminance");
     }
     for &l in &args.levels {
-        if !(l.is_finite() && l > 0.0) {
-            bail!("invalid level {l}: must be a positive, finite luminance in cd/m²");
-        }
+        super::timecourse::positive("--levels", l)?;
     }
     std::fs::create_dir_all(&args.output).with_context(|| {
         format!(
