@@ -3,6 +3,9 @@
 //!
 //! Ferwerda et al. 1996, Sec. 4, in this order:
 //!
+//! 0. optionally, veiling glare ([`glare`](crate::glare), beyond the paper, off by
+//!    default): light scattered in the eye is added to the world luminance, so that it
+//!    shows in the image and raises the adaptation of the next steps ([`prepare`]);
 //! 1. adaptation luminances (Sec. 4.4, [`adaptation`](crate::adaptation)): the world
 //!    observer's cones adapt to half the highest visible photopic luminance, the rods to
 //!    half the highest visible scotopic luminance; the display observer to half `L_dmax`;
@@ -21,20 +24,23 @@
 //! scene stays dim. The mapping is linear in the scene (Eq. 1), so the display value of the
 //! world adaptation luminance is `m_p·L_wa` (+ rods) whatever the image.
 //!
-//! The split into [`plan`] (global quantities, the [`Report`]) and [`apply`] (per-pixel
-//! work with a given [`Mapping`]) lets a caller drive the mapping itself, e.g. from a
-//! time-varying adaptation state.
+//! The split into [`prepare`] (the scene stages and the global quantities, the
+//! [`Report`]) and [`apply`] (per-pixel work with a given [`Mapping`]) lets a caller drive
+//! the mapping itself, e.g. from a time-varying adaptation state. [`plan`] is `prepare`
+//! without the scene stages.
 
 use crate::acuity::{self, AcuityFilter};
 use crate::adaptation::{
     ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2, DEFAULT_HOT_PIXEL_FRACTION, highest_visible_of,
 };
 use crate::colour::xyz_to_linear_srgb_matrix;
+use crate::glare::{self, Glare, VeilReport};
 use crate::mesopic::rod_weight;
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
 use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
 use crate::{DisplayImage, Error, HdrImage, Result, View};
+use std::borrow::Cow;
 
 /// Horizontal field of view assumed when neither the caller nor the file gives one: 60°,
 /// a common rendering camera (a project choice, reported as such).
@@ -66,6 +72,9 @@ pub struct ViewingConditions {
     /// The view, overriding the file's; `None` to use the file's or a
     /// [`DEFAULT_FOV_DEG`] perspective view.
     pub view: Option<View>,
+    /// Veiling glare in the observer's eye ([`glare`](crate::glare)); `None` (the default,
+    /// the paper's operator) for none.
+    pub glare: Option<Glare>,
 }
 
 impl Default for ViewingConditions {
@@ -78,6 +87,7 @@ impl Default for ViewingConditions {
             hot_pixel_fraction: DEFAULT_HOT_PIXEL_FRACTION,
             acuity: true,
             view: None,
+            glare: None,
         }
     }
 }
@@ -125,6 +135,9 @@ impl ViewingConditions {
                 v.horizontal_deg,
                 "a perspective view spans less than 180 degrees",
             ));
+        }
+        if let Some(g) = &self.glare {
+            g.validate()?;
         }
         Ok(())
     }
@@ -202,6 +215,29 @@ pub struct Report {
     pub view_source: Source,
     /// Pixels per degree at the image centre; `None` for a view without angles.
     pub pixels_per_degree: Option<f64>,
+    /// What the glare stage did, when it ran ([`prepare`]).
+    pub glare: Option<GlareEffect>,
+}
+
+/// The glare stage's effect on the operator.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GlareEffect {
+    /// The veil itself: its size at the fixation point (image centre), the scattered
+    /// fraction, the grid.
+    pub veil: VeilReport,
+    /// World (cone) adaptation the scene would give without glare, cd/m² (the report's
+    /// `world_adaptation_cd_m2` is with it).
+    pub world_adaptation_without_glare_cd_m2: f64,
+    /// World rod adaptation without glare, scotopic cd/m².
+    pub world_adaptation_without_glare_scotopic_cd_m2: f64,
+}
+
+impl GlareEffect {
+    /// How many times the glare raised the cone adaptation level (1 when the adaptation
+    /// was given by the caller).
+    pub fn adaptation_raise(&self, report: &Report) -> f64 {
+        report.world_adaptation_cd_m2 / self.world_adaptation_without_glare_cd_m2
+    }
 }
 
 impl Report {
@@ -262,8 +298,8 @@ pub struct Output {
 /// # Ok::<(), visadapt::Error>(())
 /// ```
 pub fn map(image: &HdrImage, conditions: &ViewingConditions) -> Result<Output> {
-    let report = plan(image, conditions)?;
-    let (display, stats) = apply(image, &report.mapping);
+    let (scene, report) = prepare(image, conditions)?;
+    let (display, stats) = apply(&scene, &report.mapping);
     Ok(Output {
         image: display,
         report,
@@ -271,8 +307,51 @@ pub fn map(image: &HdrImage, conditions: &ViewingConditions) -> Result<Output> {
     })
 }
 
+/// The operator's stages before the mapping: the scene stages the conditions switch on
+/// (glare), then [`plan`] on their result. Returns the scene to [`apply`] the mapping to
+/// (the input itself when no scene stage is on) and the report.
+///
+/// ```
+/// use visadapt::{HdrImage, glare::Glare, operator::{prepare, ViewingConditions}};
+/// // A night scene: 0.01 cd/m² everywhere and one headlight of 2e6 cd/m².
+/// let (w, h) = (320, 180);
+/// let mut scene = HdrImage::zeros(w, h);
+/// for i in 0..w * h {
+///     let l = if i == 90 * w + 200 { 2e6 } else { 0.01 };
+///     scene.x[i] = 0.9505 * l; scene.y[i] = l; scene.z[i] = 1.089 * l;
+/// }
+/// let glare = ViewingConditions { glare: Some(Glare::default()), ..Default::default() };
+/// let (retina, report) = prepare(&scene, &glare)?;
+/// let effect = report.glare.as_ref().unwrap();
+/// // The veil lifts the dark field near the light and raises the adaptation level.
+/// assert!(retina.y[90 * w + 180] > 10.0 * scene.y[90 * w + 180]);
+/// assert!(effect.adaptation_raise(&report) > 1.5);
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn prepare<'a>(
+    image: &'a HdrImage,
+    conditions: &ViewingConditions,
+) -> Result<(Cow<'a, HdrImage>, Report)> {
+    let Some(g) = &conditions.glare else {
+        return Ok((Cow::Borrowed(image), plan(image, conditions)?));
+    };
+    let without = plan(image, conditions)?;
+    let (retina, veil) = glare::apply(image, &without.view, g)?;
+    let mut report = plan(&retina, conditions)?;
+    // The glare stage writes a scotopic plane; where it came from is the input's business.
+    report.scotopic_source = without.scotopic_source;
+    report.view_source = without.view_source;
+    report.glare = Some(GlareEffect {
+        veil,
+        world_adaptation_without_glare_cd_m2: without.world_adaptation_cd_m2,
+        world_adaptation_without_glare_scotopic_cd_m2: without.world_adaptation_scotopic_cd_m2,
+    });
+    Ok((Cow::Owned(retina), report))
+}
+
 /// Compute the global quantities of the model for an image: adaptation levels, scale
-/// factors, `k`, acuity and blur size.
+/// factors, `k`, acuity and blur size. This does not run the scene stages (glare): see
+/// [`prepare`].
 pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> {
     image.check_consistent()?;
     conditions.validate()?;
@@ -368,6 +447,7 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
         view,
         view_source,
         pixels_per_degree: ppd,
+        glare: None,
     })
 }
 

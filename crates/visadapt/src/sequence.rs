@@ -179,13 +179,14 @@ pub fn render(
     let mut out = DisplayImage::default();
 
     scaled_into(scene, sequence.from_cd_m2 / hv, &mut lit);
-    let before = operator::plan(&lit, conditions)?;
+    let (retina, before) = operator::prepare(&lit, conditions)?;
     let mut eye = Adaptation::adapted(
         before.world_adaptation_cd_m2,
         before.world_adaptation_scotopic_cd_m2,
     )?;
     let mapping = eye.mapping(&before);
-    let stats = operator::apply_into(&lit, &mapping, &mut out);
+    let stats = operator::apply_into(&retina, &mapping, &mut out);
+    drop(retina);
     on_frame(&Frame {
         index: 0,
         t_seconds: None,
@@ -197,14 +198,14 @@ pub fn render(
     })?;
 
     scaled_into(scene, sequence.to_cd_m2 / hv, &mut lit);
-    let after = operator::plan(&lit, conditions)?;
+    let (retina, after) = operator::prepare(&lit, conditions)?;
     eye.step_to(0.0, &after)?;
     let mut now = 0.0;
     for (i, &t) in sequence.times_seconds.iter().enumerate() {
         eye.step_to(t - now, &after)?;
         now = t;
         let mapping = eye.mapping(&after);
-        let stats = operator::apply_into(&lit, &mapping, &mut out);
+        let stats = operator::apply_into(&retina, &mapping, &mut out);
         on_frame(&Frame {
             index: i + 1,
             t_seconds: Some(t),

@@ -305,9 +305,10 @@ pub struct Viewer<'a> {
 
 impl Viewer<'static> {
     /// The observer the operator would use for `image` under `conditions` (adaptation by
-    /// Sec. 4.4 or as given, acuity from the view), with the report of [`operator::plan`].
+    /// Sec. 4.4 or as given, acuity from the view, raised by the veil when the conditions
+    /// switch glare on), with the report of [`operator::prepare`].
     pub fn for_image(image: &HdrImage, conditions: &ViewingConditions) -> Result<(Self, Report)> {
-        let report = operator::plan(image, conditions)?;
+        let (_, report) = operator::prepare(image, conditions)?;
         Ok((Viewer::from_report(&report), report))
     }
 
