@@ -150,6 +150,40 @@ pub struct ViewingArgs {
     /// so that a few hot pixels do not set the adaptation.
     #[arg(long, allow_negative_numbers = true, value_parser = fraction, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
     pub hot_pixel_fraction: f64,
+
+    #[command(flatten)]
+    pub glare: GlareArgs,
+}
+
+/// Veiling glare in the observer's eye (map, visible, tolerance, sequence, video, demo).
+#[derive(Debug, Clone, Args)]
+pub struct GlareArgs {
+    /// Add veiling glare: light scattered in the eye (CIE 135/1 glare spread function) is
+    /// added to the scene before adaptation, so that bright lights bloom, veil what lies
+    /// near them and raise the adaptation level.
+    #[arg(long)]
+    pub glare: bool,
+
+    /// Age of the observer in years, for --glare (the eye scatters more with age).
+    #[arg(long, value_name = "YEARS", requires = "glare", allow_negative_numbers = true,
+          default_value_t = visadapt::glare::DEFAULT_AGE_YEARS)]
+    pub age: f64,
+
+    /// Eye pigmentation for --glare: 0 very dark, 0.5 brown, 1 green, 1.2 light blue (light
+    /// through the eye wall).
+    #[arg(long, value_name = "P", requires = "glare", allow_negative_numbers = true,
+          default_value_t = visadapt::glare::DEFAULT_PIGMENTATION)]
+    pub pigmentation: f64,
+}
+
+impl GlareArgs {
+    /// The library's glare option: `None` without `--glare`.
+    pub fn glare(&self) -> Option<visadapt::glare::Glare> {
+        self.glare.then_some(visadapt::glare::Glare {
+            age_years: self.age,
+            pigmentation: self.pigmentation,
+        })
+    }
 }
 
 /// Guards on the input (map, visible, tolerance, sequence, video).
@@ -193,6 +227,7 @@ impl ViewingArgs {
             world_adaptation_scotopic_cd_m2: world.and_then(|w| w.scotopic_adaptation),
             hot_pixel_fraction: self.hot_pixel_fraction,
             acuity: view.is_none_or(|v| !v.no_acuity),
+            glare: self.glare.glare(),
             ..defaults
         }
     }
@@ -467,6 +502,9 @@ pub struct DemoArgs {
     /// Skip the Fig. 12 light- and dark-adaptation sequences.
     #[arg(long)]
     pub no_sequences: bool,
+
+    #[command(flatten)]
+    pub glare: GlareArgs,
 }
 
 #[derive(Debug, Args)]

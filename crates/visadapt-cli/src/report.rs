@@ -36,6 +36,27 @@ pub fn observer_text(o: &Observer) -> String {
     )
 }
 
+/// The glare lines of a report (empty without `--glare`).
+pub fn glare_text(r: &Report) -> String {
+    let Some(g) = &r.glare else {
+        return String::new();
+    };
+    let v = &g.veil;
+    format!(
+        "glare (CIE 135/1)             age {} years, pigmentation {}: {:.1} % of the light scattered\n\
+         veil at the fixation point    {:.4e} cd/m², {:.4e} scotopic cd/m² (mean {:.4e} cd/m²)\n\
+         adaptation without glare      {:.4e} cd/m² (with glare {:.3}× that)\n",
+        v.glare.age_years,
+        v.glare.pigmentation,
+        100.0 * v.scattered_fraction,
+        v.veil_at_centre_cd_m2,
+        v.veil_at_centre_scotopic_cd_m2,
+        v.mean_veil_cd_m2,
+        g.world_adaptation_without_glare_cd_m2,
+        g.adaptation_raise(r),
+    )
+}
+
 pub fn map_text(r: &Report, stats: &PixelStats) -> String {
     let m = &r.mapping;
     let ppd = r
@@ -93,12 +114,13 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
         source(r.view_source),
         ppd,
         blur,
-    ) + &if stats.clipped > 0 {
-        format!(
-            "clipped                       {} pixels above the display maximum\n",
-            stats.clipped
-        )
-    } else {
-        String::new()
-    }
+    ) + &glare_text(r)
+        + &if stats.clipped > 0 {
+            format!(
+                "clipped                       {} pixels above the display maximum\n",
+                stats.clipped
+            )
+        } else {
+            String::new()
+        }
 }

@@ -87,9 +87,48 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
             "horizontal_fov_deg": r.view.horizontal_deg,
             "source": source_label(r.view_source),
         },
+        "glare": glare_json(r),
         "pixels_non_finite": stats.non_finite,
         "pixels_negative": stats.negative,
         "pixels_clipped": stats.clipped,
+    })
+}
+
+/// What the glare stage did ([`operator::prepare`](crate::operator::prepare) with
+/// `ViewingConditions::glare`), `null` when it was off: the observer, the veiling luminance
+/// at the fixation point (the image centre), the adaptation without glare and how many
+/// times the glare raised it, the fraction of every pixel's light scattered into the veil,
+/// and the convolution grid's cell and near radius.
+///
+/// ```
+/// use visadapt::{HdrImage, glare::Glare, operator::{map, ViewingConditions}, report};
+/// let mut scene = HdrImage::zeros(64, 36);
+/// scene.y.fill(0.01);
+/// scene.y[18 * 64 + 40] = 1e6;
+/// let conditions = ViewingConditions { glare: Some(Glare::default()), ..Default::default() };
+/// let out = map(&scene, &conditions)?;
+/// let v = report::map_json(&out.report, &out.stats, 1.0);
+/// assert_eq!(v["glare"]["age_years"], 25.0);
+/// assert!(v["glare"]["veil_at_fixation_cd_m2"].as_f64().unwrap() > 0.0);
+/// assert!(v["glare"]["adaptation_raise"].as_f64().unwrap() > 1.0);
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn glare_json(r: &Report) -> Value {
+    let Some(g) = &r.glare else {
+        return Value::Null;
+    };
+    json!({
+        "age_years": g.veil.glare.age_years,
+        "pigmentation": g.veil.glare.pigmentation,
+        "veil_at_fixation_cd_m2": g.veil.veil_at_centre_cd_m2,
+        "veil_at_fixation_scotopic_cd_m2": g.veil.veil_at_centre_scotopic_cd_m2,
+        "mean_veil_cd_m2": g.veil.mean_veil_cd_m2,
+        "adaptation_without_glare_cd_m2": g.world_adaptation_without_glare_cd_m2,
+        "scotopic_adaptation_without_glare_cd_m2": g.world_adaptation_without_glare_scotopic_cd_m2,
+        "adaptation_raise": g.adaptation_raise(r),
+        "scattered_fraction": g.veil.scattered_fraction,
+        "cell_deg": g.veil.cell_deg,
+        "near_radius_deg": g.veil.near_radius_deg,
     })
 }
 
@@ -221,6 +260,7 @@ pub fn difference_json(d: &Difference, r: &Report, input_scale: f64, map: Option
         "horizontal_fov_deg": r.view.horizontal_deg,
         "input_scale": input_scale,
         "non_finite_pixels": d.non_finite_pixels,
+        "glare": glare_json(r),
         "map": map,
     })
 }
@@ -248,6 +288,7 @@ pub fn tolerance_json(
         "median_tolerance_cd_m2": summary.median_cd_m2,
         "max_tolerance_cd_m2": summary.max_cd_m2,
         "median_relative_tolerance": summary.median_relative,
+        "glare": glare_json(r),
         "input_scale": input_scale,
         "output": output,
     })

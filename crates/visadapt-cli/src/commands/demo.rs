@@ -34,6 +34,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     for &l in &args.levels {
         super::timecourse::positive("--levels", l)?;
     }
+    // The paper's observer, with veiling glare when asked for.
+    let conditions = ViewingConditions {
+        glare: args.glare.glare(),
+        ..ViewingConditions::default()
+    };
+    conditions.validate()?;
     std::fs::create_dir_all(&args.output).with_context(|| {
         format!(
             "{}: cannot create the output directory",
@@ -57,7 +63,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let mut panels = Vec::with_capacity(args.levels.len());
     for &level in &args.levels {
         progress.set_message(format!("rendering the scene at {level} cd/m²"));
-        let panel = render(level, &args.output)?;
+        let panel = render(level, &args.output, &conditions)?;
         panels.push(panel);
         progress.inc(1);
     }
@@ -74,7 +80,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
                 "{what}: {} to {} cd/m²",
                 seq.from_cd_m2, seq.to_cd_m2
             ));
-            render_sequence(&chart, name, seq, &args.output, &progress)?;
+            render_sequence(&chart, name, seq, &args.output, &conditions, &progress)?;
             written.push(format!(
                 "  {what} (Fig. 12): {} -> {} cd/m², frames {name}-0.png (adapted) to {name}-{}.png at {} s, animated {name}.apng",
                 seq.from_cd_m2,
@@ -112,6 +118,7 @@ fn render_sequence(
     name: &str,
     seq: &Sequence,
     dir: &Path,
+    conditions: &ViewingConditions,
     progress: &ProgressBar,
 ) -> anyhow::Result<()> {
     let path = dir.join(format!("{name}.apng"));
@@ -123,7 +130,7 @@ fn render_sequence(
         SEQUENCE_FRAME_MS,
     )
     .with_context(|| path.display().to_string())?;
-    sequence::render(&chart.image, seq, &ViewingConditions::default(), |f| {
+    sequence::render(&chart.image, seq, conditions, |f| {
         let frame = dir.join(format!("{name}-{}.png", f.index));
         io::write_display(f.image, &frame, OutputFormat::Png { bits: 8 })?;
         apng.push(f.image)?;
@@ -139,12 +146,12 @@ pub fn panel_name(level: f64) -> String {
     format!("panel-{level}.png")
 }
 
-fn render(level: f64, dir: &Path) -> anyhow::Result<Panel> {
+fn render(level: f64, dir: &Path, conditions: &ViewingConditions) -> anyhow::Result<Panel> {
     let chart = Chart::new(&ChartOptions {
         white_cd_m2: level,
         ..ChartOptions::default()
     })?;
-    let out = operator::map(&chart.image, &ViewingConditions::default())?;
+    let out = operator::map(&chart.image, conditions)?;
     let path = dir.join(panel_name(level));
     io::write_display(&out.image, &path, OutputFormat::Png { bits: 8 })
         .with_context(|| path.display().to_string())?;

@@ -204,7 +204,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             view: args.view.view(hdr.width, hdr.height),
             ..conditions.clone()
         };
-        let report = operator::plan(&hdr, &conditions).with_context(what)?;
+        let (scene, report) = operator::prepare(&hdr, &conditions).with_context(what)?;
         let state = match eye.as_mut() {
             None => eye.insert(Adaptation::adapted(
                 report.world_adaptation_cd_m2,
@@ -216,7 +216,8 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             }
         };
         let mapping = state.mapping(&report);
-        operator::apply_into(&hdr, &mapping, &mut display);
+        operator::apply_into(&scene, &mapping, &mut display);
+        drop(scene);
         let out = out_path(input);
         io::write_display(&display, &out, format).with_context(|| out.display().to_string())?;
         if args.json {
@@ -236,6 +237,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
                 "rod_weight": mapping.rod_weight,
                 "offset_cd_m2": offset,
                 "acuity_cycles_per_degree": state.acuity_cycles_per_degree(),
+                "glare": visadapt::report::glare_json(&report),
             });
             println!("{line}");
         }

@@ -12,6 +12,11 @@ use std::sync::{Arc, Mutex};
 use visadapt::io;
 
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
+    if args.viewing.glare.glare {
+        anyhow::bail!(
+            "--glare: the viewer does not show veiling glare yet (use map, sequence or video)"
+        );
+    }
     let conditions = args
         .viewing
         .conditions(Some(&args.display), None, Some(&args.view));
