@@ -3,7 +3,7 @@
 //!
 //! Ferwerda et al. 1996, Sec. 4, in this order:
 //!
-//! 0. optionally, veiling glare ([`glare`](crate::glare), beyond the paper, off by
+//! 0. optionally, veiling glare ([`glare`], beyond the paper, off by
 //!    default): light scattered in the eye is added to the world luminance, so that it
 //!    shows in the image and raises the adaptation of the next steps ([`prepare`]);
 //! 1. adaptation luminances (Sec. 4.4, [`adaptation`](crate::adaptation)): the world
@@ -72,7 +72,7 @@ pub struct ViewingConditions {
     /// The view, overriding the file's; `None` to use the file's or a
     /// [`DEFAULT_FOV_DEG`] perspective view.
     pub view: Option<View>,
-    /// Veiling glare in the observer's eye ([`glare`](crate::glare)); `None` (the default,
+    /// Veiling glare in the observer's eye ([`glare`]); `None` (the default,
     /// the paper's operator) for none.
     pub glare: Option<Glare>,
 }
