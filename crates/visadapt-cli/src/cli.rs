@@ -134,6 +134,21 @@ pub struct ViewArgs {
     pub no_acuity: bool,
 }
 
+/// How the colours of the display image are formed (map, sequence, video).
+#[derive(Debug, Clone, Args)]
+pub struct ColourArgs {
+    /// Scene white the colours are adapted from to the display's D65 (CAT16): auto (the
+    /// file's: Radiance PRIMARIES white, E by default; EXR adoptedNeutral or chromaticities;
+    /// PFM D65), none (the paper: no chromatic adaptation), E, D65, or a chromaticity x,y.
+    #[arg(
+        long,
+        value_name = "WHITE",
+        default_value = "auto",
+        allow_hyphen_values = true
+    )]
+    pub white_point: visadapt::colour::WhitePoint,
+}
+
 /// The projections `--projection` offers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ProjectionArg {
@@ -219,6 +234,7 @@ impl ViewingArgs {
         display: Option<&DisplayArgs>,
         world: Option<&WorldAdaptationArgs>,
         view: Option<&ViewArgs>,
+        colour: Option<&ColourArgs>,
     ) -> visadapt::operator::ViewingConditions {
         let defaults = visadapt::operator::ViewingConditions::default();
         visadapt::operator::ViewingConditions {
@@ -228,6 +244,7 @@ impl ViewingArgs {
             hot_pixel_fraction: self.hot_pixel_fraction,
             acuity: view.is_none_or(|v| !v.no_acuity),
             glare: self.glare.glare(),
+            white_point: colour.map_or(defaults.white_point, |c| c.white_point),
             ..defaults
         }
     }
@@ -343,6 +360,9 @@ pub struct MapArgs {
 
     #[command(flatten)]
     pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub colour: ColourArgs,
 
     #[command(flatten)]
     pub viewing: ViewingArgs,
@@ -707,6 +727,9 @@ pub struct SequenceArgs {
     pub view: ViewArgs,
 
     #[command(flatten)]
+    pub colour: ColourArgs,
+
+    #[command(flatten)]
     pub viewing: ViewingArgs,
 
     #[command(flatten)]
@@ -756,6 +779,9 @@ pub struct VideoArgs {
 
     #[command(flatten)]
     pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub colour: ColourArgs,
 
     #[command(flatten)]
     pub viewing: ViewingArgs,

@@ -36,6 +36,18 @@ pub fn observer_text(o: &Observer) -> String {
     )
 }
 
+/// The chromatic adaptation used, in words.
+pub fn white_point(r: &Report) -> String {
+    match r.scene_white {
+        None => "scene white shown as it is, no chromatic adaptation (--white-point none)".into(),
+        Some(w) => format!(
+            "scene white {} ({}) adapted to the display's D65 (CAT16)",
+            visadapt::colour::white_name(w),
+            source(r.scene_white_source)
+        ),
+    }
+}
+
 /// The glare lines of a report (empty without `--glare`).
 pub fn glare_text(r: &Report) -> String {
     let Some(g) = &r.glare else {
@@ -85,7 +97,8 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
          rod weight k (Eq. 6)          {:.4}\n\
          acuity (Fig. 7, Eq. 7)        {:.2} cycles/degree ({}), threshold contrast {:.4}{}\n\
          view                          {} {:.1} deg ({}), {} pixels/degree\n\
-         acuity blur                   {}\n",
+         acuity blur                   {}\n\
+         white point                   {}\n",
         r.width,
         r.height,
         r.highest_visible_cd_m2,
@@ -114,6 +127,7 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
         source(r.view_source),
         ppd,
         blur,
+        white_point(r),
     ) + &glare_text(r)
         + &if stats.clipped > 0 {
             format!(

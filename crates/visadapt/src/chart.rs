@@ -614,6 +614,8 @@ impl Chart {
             scotopic: Some(v),
             view: Some(View::perspective(fov_deg, width, height)),
             absolute_units: true,
+            // The chart is lit by the paper's equal-energy illuminant (Sec. 5).
+            adopted_white: Some(crate::colour::EQUAL_ENERGY),
         };
         Ok(Chart {
             image,

@@ -32,6 +32,12 @@ pub struct HdrImage {
     /// False when the file only holds relative values (PFM, plain EXR RGB), which the
     /// caller should scale (the CLI's `--scale` / `--peak`).
     pub absolute_units: bool,
+    /// The chromaticity the scene's observer takes as white, as the file declares it
+    /// (Radiance `PRIMARIES=` white, E by default; OpenEXR `adoptedNeutral`, else the
+    /// `chromaticities` white; D65 for PFM; E for the built-in chart and the paper's XYZ
+    /// layout), or `None` when nothing says. The operator adapts the cone image from it to
+    /// the display white ([`colour::WhitePoint::Auto`](crate::colour::WhitePoint)).
+    pub adopted_white: Option<crate::colour::Xy>,
 }
 
 impl HdrImage {
@@ -47,6 +53,7 @@ impl HdrImage {
             scotopic: None,
             view: None,
             absolute_units: false,
+            adopted_white: None,
         }
     }
 

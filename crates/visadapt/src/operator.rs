@@ -14,7 +14,11 @@
 //! 3. the mesopic rod weight `k` (Eq. 6, [`mesopic`](crate::mesopic));
 //! 4. per pixel, the display colour `m_p·XYZ + k·m_s·V·white` (Eq. 6: the cone image keeps
 //!    its chromaticity, "the chromatic channels follow the same mapping"; the rod image is
-//!    grey, the display white), converted to linear sRGB relative to `L_dmax`;
+//!    grey, the display white), converted to linear sRGB relative to `L_dmax`. Beyond the
+//!    paper, the cone image is first taken from the scene's adopted white to the display
+//!    white by the CAT16 von Kries transform ([`colour`](crate::colour#chromatic-adaptation-beyond-the-paper),
+//!    [`ViewingConditions::white_point`]; [`WhitePoint::Off`] is the paper's behaviour); it
+//!    keeps neutrals' luminance exactly and is folded into the same per-pixel matrix;
 //! 5. the acuity Gaussian (Eq. 7, [`acuity`]), a separate stage on the
 //!    linear display planes. Because the mapping of step 4 is affine with coefficients
 //!    shared by all pixels, blurring its output equals mapping the blurred scene;
@@ -33,7 +37,9 @@ use crate::acuity::{self, AcuityFilter};
 use crate::adaptation::{
     ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2, DEFAULT_HOT_PIXEL_FRACTION, highest_visible_of,
 };
-use crate::colour::xyz_to_linear_srgb_matrix;
+use crate::colour::{
+    self, D65, IDENTITY, Mat3, WhitePoint, Xy, mul_mat, xyz_to_linear_srgb_matrix,
+};
 use crate::glare::{self, Glare, VeilReport};
 use crate::mesopic::rod_weight;
 use crate::scale::{photopic_scale, scotopic_scale};
@@ -75,6 +81,10 @@ pub struct ViewingConditions {
     /// Veiling glare in the observer's eye ([`glare`]); `None` (the default,
     /// the paper's operator) for none.
     pub glare: Option<Glare>,
+    /// The scene white the cone image is adapted from to the display's D65 (CAT16, see
+    /// [`colour`](crate::colour#chromatic-adaptation-beyond-the-paper)); default
+    /// [`WhitePoint::Auto`], the file's; [`WhitePoint::Off`] for the paper's behaviour.
+    pub white_point: WhitePoint,
 }
 
 impl Default for ViewingConditions {
@@ -87,6 +97,7 @@ impl Default for ViewingConditions {
             hot_pixel_fraction: DEFAULT_HOT_PIXEL_FRACTION,
             acuity: true,
             view: None,
+            white_point: WhitePoint::Auto,
             glare: None,
         }
     }
@@ -111,6 +122,15 @@ impl ViewingConditions {
                 "hot-pixel-fraction",
                 self.hot_pixel_fraction,
                 "must be in [0, 1)",
+            ));
+        }
+        if let WhitePoint::Chromaticity(w) = self.white_point
+            && !colour::is_valid_white(w)
+        {
+            return Err(Error::invalid(
+                "white-point",
+                format!("{},{}", w[0], w[1]),
+                "must be a chromaticity x,y with x > 0, y > 0 and x + y < 1",
             ));
         }
         if let Some(v) = &self.view
@@ -176,6 +196,9 @@ pub struct Mapping {
     pub display_max_cd_m2: f64,
     /// Standard deviation of the acuity Gaussian in pixels; 0 for no blur.
     pub blur_sigma_px: f64,
+    /// The chromatic adaptation applied to the cone image's XYZ before it goes to the
+    /// display (CAT16 from the scene white to D65; [`IDENTITY`] for none).
+    pub chromatic_adaptation: Mat3,
 }
 
 /// Everything the operator used, with units.
@@ -215,6 +238,12 @@ pub struct Report {
     pub view_source: Source,
     /// Pixels per degree at the image centre; `None` for a view without angles.
     pub pixels_per_degree: Option<f64>,
+    /// The scene white the cone image was adapted from to D65; `None` when chromatic
+    /// adaptation is off ([`WhitePoint::Off`]).
+    pub scene_white: Option<Xy>,
+    /// Where `scene_white` came from: the caller, the file, or the default (D65, no
+    /// change, for an image that declares no white).
+    pub scene_white_source: Source,
     /// What the glare stage did, when it ran ([`prepare`]).
     pub glare: Option<GlareEffect>,
 }
@@ -412,6 +441,22 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
         ),
     };
     let ppd = view.pixels_per_degree(image.width);
+    let (scene_white, scene_white_source) = match (conditions.white_point, image.adopted_white) {
+        (WhitePoint::Off, _) => (None, Source::Caller),
+        (WhitePoint::Chromaticity(w), _) => (Some(w), Source::Caller),
+        (WhitePoint::Auto, Some(w)) => (Some(w), Source::File),
+        (WhitePoint::Auto, None) => (Some(D65), Source::Default),
+    };
+    let chromatic_adaptation = match scene_white {
+        Some(w) => colour::cat16(w, D65).ok_or_else(|| {
+            Error::invalid(
+                "white-point",
+                format!("{},{}", w[0], w[1]),
+                "is not a usable white chromaticity",
+            )
+        })?,
+        None => IDENTITY,
+    };
     let acuity = AcuityFilter::new(lwa, lwa_s);
     let blur_sigma_px = match (conditions.acuity, ppd) {
         (true, Some(ppd)) => {
@@ -441,6 +486,7 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
             scotopic_offset_cd_m2: 0.0,
             display_max_cd_m2: conditions.display_max_cd_m2,
             blur_sigma_px,
+            chromatic_adaptation,
         },
         acuity,
         acuity_applied: conditions.acuity,
@@ -448,13 +494,15 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
         view_source,
         pixels_per_degree: ppd,
         glare: None,
+        scene_white,
+        scene_white_source,
     })
 }
 
 /// Per-pixel coefficients of the mapping, display-relative.
 #[derive(Clone, Copy)]
 struct Coefficients {
-    /// Rows: linear sRGB from XYZ, times `m_p / L_dmax`.
+    /// Rows: linear sRGB from XYZ after the chromatic adaptation, times `m_p / L_dmax`.
     cone: [[f32; 3]; 3],
     /// `k·m_s / L_dmax`, added equally to R, G, B (grey of the display white).
     rod: f32,
@@ -467,7 +515,7 @@ struct Coefficients {
 
 impl Coefficients {
     fn new(m: &Mapping) -> Self {
-        let xyz2rgb = xyz_to_linear_srgb_matrix();
+        let xyz2rgb = mul_mat(&xyz_to_linear_srgb_matrix(), &m.chromatic_adaptation);
         let s = m.photopic_scale / m.display_max_cd_m2;
         let bound = f64::from(MAX_DISPLAY_RELATIVE);
         let clamp = |v: f64| v.clamp(-bound, bound);

@@ -41,7 +41,9 @@ pub fn projection_label(p: Projection) -> &'static str {
 }
 
 /// The report of one [`operator::map`](crate::operator::map) run (`visadapt map --json`):
-/// adaptation levels, thresholds, scale factors, acuity, view and pixel counts.
+/// adaptation levels, thresholds, scale factors, acuity, view, the scene white the colours
+/// were adapted from (`scene_white`: `"E"`, `"D65"`, `"x,y"` or null when off) and pixel
+/// counts.
 /// `input_scale` is the factor the caller applied to the file's values to get cd/m²
 /// (1 when none).
 ///
@@ -88,6 +90,9 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
             "source": source_label(r.view_source),
         },
         "glare": glare_json(r),
+        "scene_white_xy": r.scene_white,
+        "scene_white": r.scene_white.map(crate::colour::white_name),
+        "scene_white_source": source_label(r.scene_white_source),
         "pixels_non_finite": stats.non_finite,
         "pixels_negative": stats.negative,
         "pixels_clipped": stats.clipped,

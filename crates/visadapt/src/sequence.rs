@@ -133,6 +133,7 @@ fn scaled_into(scene: &HdrImage, factor: f64, out: &mut HdrImage) {
     out.height = scene.height;
     out.view = scene.view;
     out.absolute_units = true;
+    out.adopted_white = scene.adopted_white;
 }
 
 /// Render a [`Sequence`] of `scene` (any units: it is rescaled to each level), calling

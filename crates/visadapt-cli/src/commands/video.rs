@@ -136,9 +136,12 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             args.fps
         );
     }
-    let conditions = args
-        .viewing
-        .conditions(Some(&args.display), None, Some(&args.view));
+    let conditions = args.viewing.conditions(
+        Some(&args.display),
+        None,
+        Some(&args.view),
+        Some(&args.colour),
+    );
     conditions.validate()?;
     let (format, ext) = match args.format {
         VideoFormat::Png => (OutputFormat::Png { bits: 8 }, "png"),

@@ -26,7 +26,7 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     };
     let conditions = args
         .viewing
-        .conditions(None, Some(&args.world), Some(&args.view));
+        .conditions(None, Some(&args.world), Some(&args.view), None);
     conditions.validate()?;
 
     let limits = args.limits.limits();

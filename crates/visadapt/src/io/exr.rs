@@ -30,6 +30,10 @@
 //! 5. Two of `R`, `G`, `B`: the missing one is taken as 0, as OpenEXR's `RgbaInputFile`
 //!    does.
 //!
+//! Adopted white ([`HdrImage::adopted_white`], what the operator adapts from): the
+//! `adoptedNeutral` attribute when present, else the white of `chromaticities` (D65 when
+//! absent); for rule 1 (the paper's layout) equal energy, the paper's illuminant (Sec. 5).
+//!
 //! Units: when the part has a positive, finite `whiteLuminance` attribute (the luminance in
 //! cd/m² of RGB (1, 1, 1), OpenEXR `ImfStandardAttributes.h`), rules 2–5 multiply by it and
 //! the image is marked absolute; otherwise values are taken as cd/m² as they stand and
@@ -782,6 +786,24 @@ fn file_matrix(header: &Header) -> Result<Mat3> {
         .ok_or_else(|| invalid("degenerate chromaticities attribute"))
 }
 
+/// The scene white of a part: its `adoptedNeutral` ("pixels whose (x, y) match the
+/// adoptedNeutral value should be mapped to neutral values on the display", OpenEXR
+/// `ImfStandardAttributes.h`), else the white of its `chromaticities` (D65 when absent), and
+/// for the paper's X/Y/Z layout, to which `chromaticities` does not apply, the paper's
+/// equal-energy illuminant (Sec. 5). `None` if the value found is not a usable white.
+fn adopted_white(header: &Header, layout: &Layout) -> Option<colour::Xy> {
+    let xy = |v: Vec2<f32>| [f64::from(v.0), f64::from(v.1)];
+    let white = match (header.own_attributes.adopted_neutral, layout) {
+        (Some(n), _) => xy(n),
+        (None, Layout::Xyz { .. }) => colour::EQUAL_ENERGY,
+        (None, _) => header
+            .shared_attributes
+            .chromaticities
+            .map_or(REC709.white, |c| xy(c.white)),
+    };
+    colour::is_valid_white(white).then_some(white)
+}
+
 /// `v` as `f32`, saturating finite values at ±`f32::MAX` (Inf and NaN pass through).
 #[inline]
 fn saturate(v: f64) -> f32 {
@@ -869,6 +891,7 @@ fn to_hdr(
         scotopic: None,
         view: None,
         absolute_units: white_luminance.is_some(),
+        adopted_white: adopted_white(header, layout),
     };
     match *layout {
         Layout::Xyz { scotopic, .. } => {
@@ -975,6 +998,7 @@ fn write_layer(
     channels: Vec<(&'static str, Vec<f32>)>,
     white_luminance: Option<f32>,
     chromaticities: Option<exr::meta::attribute::Chromaticities>,
+    adopted_neutral: Option<colour::Xy>,
     w: impl std::io::Write + std::io::Seek,
 ) -> Result<()> {
     use exr::prelude::*;
@@ -984,6 +1008,7 @@ fn write_layer(
         .collect();
     let attributes = LayerAttributes {
         white_luminance,
+        adopted_neutral: adopted_neutral.map(|[x, y]| Vec2(x as f32, y as f32)),
         ..LayerAttributes::default()
     };
     let encoding = Encoding {
@@ -1041,13 +1066,15 @@ pub fn write_display(image: &DisplayImage, w: impl std::io::Write + std::io::See
         ],
         Some(l),
         Some(rec709_attribute()),
+        None,
         w,
     )
 }
 
 /// Write an HDR image in the paper's own layout: channels `X`, `Y`, `Z` (+ `scotopic` when
-/// present) as 32-bit floats in cd/m² (scotopic cd/m²), RLE. [`decode`] reads it back as an
-/// absolute image.
+/// present) as 32-bit floats in cd/m² (scotopic cd/m²), RLE, with the image's adopted white
+/// as `adoptedNeutral` when it has one other than E (the layout's own white). [`decode`] reads it back as an absolute image with
+/// the same adopted white.
 pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Result<()> {
     let mut planes = vec![&image.x, &image.y, &image.z];
     if let Some(s) = &image.scotopic {
@@ -1062,7 +1089,16 @@ pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Re
     if let Some(s) = &image.scotopic {
         channels.push(("scotopic", s.clone()));
     }
-    write_layer(image.width, image.height, channels, None, None, w)
+    write_layer(
+        image.width,
+        image.height,
+        channels,
+        None,
+        None,
+        // E is what the layout means without the attribute.
+        image.adopted_white.filter(|w| *w != colour::EQUAL_ENERGY),
+        w,
+    )
 }
 
 /// Write one luminance plane in cd/m² (e.g. a [`visibility`](crate::visibility) tolerance
@@ -1076,7 +1112,7 @@ pub fn write_luminance(
 ) -> Result<()> {
     let plane = y.to_vec();
     check_planes(width, height, &[&plane])?;
-    write_layer(width, height, vec![("Y", plane)], Some(1.0), None, w)
+    write_layer(width, height, vec![("Y", plane)], Some(1.0), None, None, w)
 }
 
 /// Write one plane of numbers that are not luminances (e.g. a
