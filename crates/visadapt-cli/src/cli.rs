@@ -134,7 +134,7 @@ pub struct ViewArgs {
     pub no_acuity: bool,
 }
 
-/// How the colours of the display image are formed (map, sequence, video).
+/// How the colours of the display image are formed (map, sequence, video, serve).
 #[derive(Debug, Clone, Args)]
 pub struct ColourArgs {
     /// Scene white the colours are adapted from to the display's D65 (CAT16): auto (the
@@ -836,6 +836,9 @@ pub struct ServeArgs {
 
     #[command(flatten)]
     pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub colour: ColourArgs,
 
     #[command(flatten)]
     pub viewing: ViewingArgs,

@@ -1126,7 +1126,7 @@ pub fn write_plane(
 ) -> Result<()> {
     let plane = values.to_vec();
     check_planes(width, height, &[&plane])?;
-    write_layer(width, height, vec![("Y", plane)], None, None, w)
+    write_layer(width, height, vec![("Y", plane)], None, None, None, w)
 }
 
 #[cfg(test)]

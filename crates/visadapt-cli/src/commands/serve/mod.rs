@@ -17,9 +17,12 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
             "--glare: the viewer does not show veiling glare yet (use map, sequence or video)"
         );
     }
-    let conditions = args
-        .viewing
-        .conditions(Some(&args.display), None, Some(&args.view));
+    let conditions = args.viewing.conditions(
+        Some(&args.display),
+        None,
+        Some(&args.view),
+        Some(&args.colour),
+    );
     conditions.validate()?;
 
     let mut image = io::read(&args.input, &args.limits.limits())
