@@ -243,6 +243,8 @@ fn build(
         scotopic,
         view,
         absolute_units: true,
+        // Arrays from numpy declare no white: shown as they are (D65 assumed).
+        adopted_white: None,
     })
 }
 
