@@ -134,6 +134,21 @@ pub struct ViewArgs {
     pub no_acuity: bool,
 }
 
+/// How the colours of the display image are formed (map, sequence, video, serve).
+#[derive(Debug, Clone, Args)]
+pub struct ColourArgs {
+    /// Scene white the colours are adapted from to the display's D65 (CAT16): auto (the
+    /// file's: Radiance PRIMARIES white, E by default; EXR adoptedNeutral or chromaticities;
+    /// PFM D65), none (the paper: no chromatic adaptation), E, D65, or a chromaticity x,y.
+    #[arg(
+        long,
+        value_name = "WHITE",
+        default_value = "auto",
+        allow_hyphen_values = true
+    )]
+    pub white_point: visadapt::colour::WhitePoint,
+}
+
 /// The projections `--projection` offers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ProjectionArg {
@@ -194,6 +209,40 @@ pub struct ViewingArgs {
     /// so that a few hot pixels do not set the adaptation.
     #[arg(long, allow_negative_numbers = true, value_parser = fraction, value_name = "F", default_value_t = visadapt::adaptation::DEFAULT_HOT_PIXEL_FRACTION)]
     pub hot_pixel_fraction: f64,
+
+    #[command(flatten)]
+    pub glare: GlareArgs,
+}
+
+/// Veiling glare in the observer's eye (map, visible, tolerance, sequence, video, demo).
+#[derive(Debug, Clone, Args)]
+pub struct GlareArgs {
+    /// Add veiling glare: light scattered in the eye (CIE 135/1 glare spread function) is
+    /// added to the scene before adaptation, so that bright lights bloom, veil what lies
+    /// near them and raise the adaptation level.
+    #[arg(long)]
+    pub glare: bool,
+
+    /// Age of the observer in years, for --glare (the eye scatters more with age).
+    #[arg(long, value_name = "YEARS", requires = "glare", allow_negative_numbers = true,
+          default_value_t = visadapt::glare::DEFAULT_AGE_YEARS)]
+    pub age: f64,
+
+    /// Eye pigmentation for --glare: 0 very dark, 0.5 brown, 1 green, 1.2 light blue (light
+    /// through the eye wall).
+    #[arg(long, value_name = "P", requires = "glare", allow_negative_numbers = true,
+          default_value_t = visadapt::glare::DEFAULT_PIGMENTATION)]
+    pub pigmentation: f64,
+}
+
+impl GlareArgs {
+    /// The library's glare option: `None` without `--glare`.
+    pub fn glare(&self) -> Option<visadapt::glare::Glare> {
+        self.glare.then_some(visadapt::glare::Glare {
+            age_years: self.age,
+            pigmentation: self.pigmentation,
+        })
+    }
 }
 
 /// Guards on the input (map, visible, tolerance, sequence, video).
@@ -229,6 +278,7 @@ impl ViewingArgs {
         display: Option<&DisplayArgs>,
         world: Option<&WorldAdaptationArgs>,
         view: Option<&ViewArgs>,
+        colour: Option<&ColourArgs>,
     ) -> visadapt::operator::ViewingConditions {
         let defaults = visadapt::operator::ViewingConditions::default();
         visadapt::operator::ViewingConditions {
@@ -238,6 +288,8 @@ impl ViewingArgs {
             hot_pixel_fraction: self.hot_pixel_fraction,
             acuity: view.is_none_or(|v| !v.no_acuity),
             adaptation: self.adaptation.mode(),
+            glare: self.glare.glare(),
+            white_point: colour.map_or(defaults.white_point, |c| c.white_point),
             ..defaults
         }
     }
@@ -355,6 +407,9 @@ pub struct MapArgs {
     pub view: ViewArgs,
 
     #[command(flatten)]
+    pub colour: ColourArgs,
+
+    #[command(flatten)]
     pub viewing: ViewingArgs,
 
     /// Bits per channel of PNG output [default: 8].
@@ -416,11 +471,15 @@ fn parse_memory(s: &str) -> Result<u64, String> {
     }
 }
 
-/// A positive, finite number: luminances, factors, angles, rates.
+/// A positive, finite number: luminances, factors, angles, rates; at most
+/// [`visadapt::MAX_LUMINANCE_CD_M2`], the range the f32 pipeline carries.
 fn positive(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-        Ok(_) => Err("must be a positive, finite number".into()),
+        Ok(v) if v.is_finite() && v > 0.0 && v <= visadapt::MAX_LUMINANCE_CD_M2 => Ok(v),
+        Ok(_) => Err(format!(
+            "must be a positive number of at most {:e} (the range the f32 pipeline carries)",
+            visadapt::MAX_LUMINANCE_CD_M2
+        )),
         Err(_) => Err("not a number".into()),
     }
 }
@@ -511,6 +570,9 @@ pub struct DemoArgs {
 
     #[command(flatten)]
     pub adaptation: AdaptationArgs,
+
+    #[command(flatten)]
+    pub glare: GlareArgs,
 }
 
 #[derive(Debug, Args)]
@@ -713,6 +775,9 @@ pub struct SequenceArgs {
     pub view: ViewArgs,
 
     #[command(flatten)]
+    pub colour: ColourArgs,
+
+    #[command(flatten)]
     pub viewing: ViewingArgs,
 
     #[command(flatten)]
@@ -762,6 +827,9 @@ pub struct VideoArgs {
 
     #[command(flatten)]
     pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub colour: ColourArgs,
 
     #[command(flatten)]
     pub viewing: ViewingArgs,
@@ -816,6 +884,9 @@ pub struct ServeArgs {
 
     #[command(flatten)]
     pub view: ViewArgs,
+
+    #[command(flatten)]
+    pub colour: ColourArgs,
 
     #[command(flatten)]
     pub viewing: ViewingArgs,

@@ -36,6 +36,39 @@ pub fn observer_text(o: &Observer) -> String {
     )
 }
 
+/// The chromatic adaptation used, in words.
+pub fn white_point(r: &Report) -> String {
+    match r.scene_white {
+        None => "scene white shown as it is, no chromatic adaptation (--white-point none)".into(),
+        Some(w) => format!(
+            "scene white {} ({}) adapted to the display's D65 (CAT16)",
+            visadapt::colour::white_name(w),
+            source(r.scene_white_source)
+        ),
+    }
+}
+
+/// The glare lines of a report (empty without `--glare`).
+pub fn glare_text(r: &Report) -> String {
+    let Some(g) = &r.glare else {
+        return String::new();
+    };
+    let v = &g.veil;
+    format!(
+        "glare (CIE 135/1)             age {} years, pigmentation {}: {:.1} % of the light scattered\n\
+         veil at the fixation point    {:.4e} cd/m², {:.4e} scotopic cd/m² (mean {:.4e} cd/m²)\n\
+         adaptation without glare      {:.4e} cd/m² (with glare {:.3}× that)\n",
+        v.glare.age_years,
+        v.glare.pigmentation,
+        100.0 * v.scattered_fraction,
+        v.veil_at_centre_cd_m2,
+        v.veil_at_centre_scotopic_cd_m2,
+        v.mean_veil_cd_m2,
+        g.world_adaptation_without_glare_cd_m2,
+        g.adaptation_raise(r),
+    )
+}
+
 pub fn map_text(r: &Report, stats: &PixelStats) -> String {
     let m = &r.mapping;
     let ppd = r
@@ -64,7 +97,8 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
          rod weight k (Eq. 6)          {:.4}\n\
          acuity (Fig. 7, Eq. 7)        {:.2} cycles/degree ({}), threshold contrast {:.4}{}\n\
          view                          {} {:.1} deg ({}), {} pixels/degree\n\
-         acuity blur                   {}\n",
+         acuity blur                   {}\n\
+         white point                   {}\n",
         r.width,
         r.height,
         r.highest_visible_cd_m2,
@@ -93,7 +127,9 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
         source(r.view_source),
         ppd,
         blur,
-    ) + &local_text(r)
+        white_point(r),
+    ) + &glare_text(r)
+        + &local_text(r)
         + &if stats.clipped > 0 {
             format!(
                 "clipped                       {} pixels above the display maximum\n",

@@ -133,6 +133,68 @@ fn map_text_report_names_what_it_used() {
         .stdout(predicate::str::contains("rod weight k"));
 }
 
+/// `--white-point`: the report says which white the colours were adapted from (issue 8 §1).
+#[test]
+fn map_reports_the_white_point_used() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |extra: &[&str]| {
+        let out = visadapt()
+            .arg("map")
+            .arg(data("mixtex.hdr"))
+            .arg("-o")
+            .arg(dir.path().join("o.png"))
+            .arg("--json")
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        json(&out.stdout)
+    };
+    let auto = run(&[]);
+    assert_eq!(auto["scene_white"], "E");
+    assert_eq!(auto["scene_white_source"], "from the file");
+    let xy = auto["scene_white_xy"].as_array().unwrap();
+    assert!((xy[0].as_f64().unwrap() - 1.0 / 3.0).abs() < 1e-12);
+    let off = run(&["--white-point", "none"]);
+    assert!(off["scene_white"].is_null());
+    let d65 = run(&["--white-point", "D65"]);
+    assert_eq!(d65["scene_white"], "D65");
+    assert_eq!(d65["scene_white_source"], "given");
+    let xy = run(&["--white-point", "0.4476,0.4074"]);
+    assert_eq!(xy["scene_white"], "0.4476,0.4074");
+
+    visadapt()
+        .arg("map")
+        .arg(data("mixtex.hdr"))
+        .arg("-o")
+        .arg(dir.path().join("t.png"))
+        .assert()
+        .success()
+        .stdout(predicate::str::contains(
+            "scene white E (from the file) adapted to the display's D65 (CAT16)",
+        ));
+    for bad in ["D50x", "0.7,0.5", "0,0.3", "nan,0.3"] {
+        let out = visadapt()
+            .arg("map")
+            .arg(data("mixtex.hdr"))
+            .arg("-o")
+            .arg(dir.path().join("bad.png"))
+            .args(["--white-point", bad])
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{bad}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("--white-point"),
+            "{bad}"
+        );
+        assert!(!dir.path().join("bad.png").exists());
+    }
+}
+
 /// Every failure: one line naming the file, non-zero exit, no output and no temporary
 /// file left behind, and an existing output file untouched.
 #[test]

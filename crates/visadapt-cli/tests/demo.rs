@@ -49,7 +49,7 @@ fn demo_writes_four_panels_a_contact_sheet_and_a_table() {
         "1000 ",
         "20/12",
         "vivid",
-        "red 2.2x",
+        "red 2.1x",
         "10 ",
         "0.04 ",
         "20/92",

@@ -237,3 +237,77 @@ fn outputs_honour_the_umask_and_never_copy_setuid() {
     assert_eq!(mode(&d.join("old.svg")), 0o750);
     assert_no_temporaries(d);
 }
+
+#[test]
+fn flags_beyond_the_f32_range_are_refused_by_their_own_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_scene(d, "scene.hdr");
+    // Before the fix: Inf pixels written, or "invalid scotopic inf" for `observer 1e308`.
+    fails_with(d, &["observer", "1e308"], "<L>");
+    fails_with(
+        d,
+        &["map", "scene.hdr", "-o", "o.png", "--peak", "1e308"],
+        "peak",
+    );
+    fails_with(
+        d,
+        &["map", "scene.hdr", "-o", "o.png", "--scale", "1e38"],
+        "scale",
+    );
+    fails_with(
+        d,
+        &["map", "scene.hdr", "-o", "o.png", "--display-max", "1e39"],
+        "display-max",
+    );
+    fails_with(d, &["chart", "-o", "c.exr", "--white", "1e308"], "--white");
+    fails_with(
+        d,
+        &["timecourse", "--from", "1e300", "--to", "1", "--times", "0"],
+        "--from",
+    );
+    assert!(files_in(d).iter().all(|f| f == "scene.hdr"));
+}
+
+#[test]
+fn one_huge_finite_pixel_does_not_blacken_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A 64×64 grey PFM in a dark scene, one pixel at 1e37.
+    let (w, h) = (64usize, 64usize);
+    let mut f = format!("Pf\n{w} {h}\n-1.0\n").into_bytes();
+    for i in 0..w * h {
+        let v: f32 = if i == 2080 { 1e37 } else { 0.01 };
+        f.extend(v.to_le_bytes());
+    }
+    std::fs::write(d.join("hot.pfm"), &f).unwrap();
+    let out = visadapt()
+        .current_dir(d)
+        .args([
+            "map",
+            "hot.pfm",
+            "-o",
+            "hot.png",
+            "--json",
+            "--world-adaptation",
+            "0.01",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json(&out.stdout);
+    assert!(v["pixels_clipped"].as_u64().unwrap() >= 1, "{v}");
+    let dec = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(d.join("hot.png")).unwrap(),
+    ));
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut buf).unwrap();
+    let black = buf.chunks(3).filter(|p| p.iter().all(|c| *c == 0)).count();
+    // Before the fix: 4096 of 4096 black.
+    assert!(black < 100, "{black} of 4096 pixels black");
+}

@@ -365,6 +365,25 @@ fn bad_parameters_are_400_with_one_line() {
         assert!(text.starts_with(says), "{query}: {text:?}");
     }
     assert_eq!(server.get("/nothing").status, 404);
+    // A name other than loopback's (DNS rebinding) is refused; localhost is fine.
+    let port = server.url.rsplit(':').next().unwrap();
+    for (host, status) in [
+        (format!("evil.example:{port}"), 403),
+        (format!("localhost:{port}"), 200),
+        (format!("127.0.0.1:{port}"), 200),
+        (format!("[::1]:{port}"), 200),
+    ] {
+        let agent: ureq::Agent = ureq::Agent::config_builder()
+            .http_status_as_error(false)
+            .build()
+            .into();
+        let r = agent
+            .get(format!("{}/", server.url))
+            .header("host", &host)
+            .call()
+            .unwrap();
+        assert_eq!(r.status().as_u16(), status, "{host}");
+    }
     // The server is still well after all that.
     assert_eq!(server.png("/api/frame?width=50").0, 50);
 }

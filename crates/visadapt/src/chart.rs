@@ -162,13 +162,7 @@ impl ChartOptions {
 
     /// Check every parameter's domain.
     pub fn validate(&self) -> Result<()> {
-        let positive = |name, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(Error::invalid(name, v, "must be a positive, finite number"))
-            }
-        };
+        let positive = |name, v: f64| crate::check_luminance(name, v).map(|_| ());
         positive("white", self.white_cd_m2)?;
         positive("distance", self.viewing_distance_m)?;
         positive("pixels-per-degree", self.pixels_per_degree)?;
@@ -620,6 +614,8 @@ impl Chart {
             scotopic: Some(v),
             view: Some(View::perspective(fov_deg, width, height)),
             absolute_units: true,
+            // The chart is lit by the paper's equal-energy illuminant (Sec. 5).
+            adopted_white: Some(crate::colour::EQUAL_ENERGY),
         };
         Ok(Chart {
             image,

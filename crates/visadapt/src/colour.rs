@@ -1,8 +1,31 @@
-//! Colour spaces: RGB primaries to CIE XYZ, XYZ to linear sRGB, and the sRGB transfer curve.
+//! Colour spaces: RGB primaries to CIE XYZ, XYZ to linear sRGB, the sRGB transfer curve, and
+//! chromatic adaptation from the scene's white to the display's.
 //!
 //! The model works in CIE XYZ (paper Sec. 4: "image files with photopic luminance (CIE Y),
 //! scotopic luminance, and CIE XZ channels"), and outputs "a fixed RGB color space", which
 //! here is sRGB: ITU-R BT.709 primaries, D65 white, the IEC 61966-2-1 transfer curve.
+//!
+//! # Chromatic adaptation (beyond the paper)
+//!
+//! The paper maps luminance only ("the chromatic channels follow the same mapping") and says
+//! nothing of white balance. Without it, a scene lit by the paper's own equal-energy
+//! illuminant E (Sec. 5), or any Radiance RGB file (whose white is E), shows its whites pink on
+//! a D65 display: XYZ = (1, 1, 1) is linear sRGB (1.205, 0.948, 0.909), CIELAB a* = +8.5,
+//! b* = +5.6 against D65. An observer adapted to the scene sees those whites as white, and one
+//! adapted to the display expects white to be the display white. So the cone image is taken
+//! from the scene's adopted white to the display white by a von Kries transform in the CAT16
+//! cone space (Li, Li, Wang, Zu, Luo, Cui, Melgosa, Brill & Pointer 2017, "Comprehensive color
+//! solutions: CAM16, CAT16, and CAM16-UCS", Color Res. Appl. 42:703–718, Eq. 4–6):
+//! `XYZ' = M16⁻¹ · diag(LMS_display / LMS_scene) · M16 · XYZ`, with complete adaptation
+//! (degree `D = 1`): the paper's steady state is full adaptation, and a user asking for
+//! "what the scene looks like" expects its neutral surfaces neutral ([`cat16`]).
+//!
+//! What it leaves alone: the transform maps the scene white (Y = 1) to the display white
+//! (Y = 1), so every neutral keeps its luminance exactly; a coloured surface's Y moves by
+//! well under 1 % for E → D65 (the ColorChecker red patch by −0.5 %, against −3.6 % with
+//! Bradford). All thresholds, adaptation luminances and the scotopic channel are computed from
+//! the untransformed XYZ and V, so Eqs. 1–7 are unchanged, and the rod image stays grey (the
+//! display white). [`WhitePoint::Off`] keeps the paper's behaviour (no adaptation).
 
 /// A CIE 1931 xy chromaticity.
 pub type Xy = [f64; 2];
@@ -41,6 +64,124 @@ pub const RADIANCE_DEFAULT: Chromaticities = Chromaticities {
 /// A row-major 3×3 matrix.
 pub type Mat3 = [[f64; 3]; 3];
 
+/// The equal-energy white E, x = y = 1/3: the paper's illuminant (Sec. 5) and the white of
+/// Radiance RGB.
+pub const EQUAL_ENERGY: Xy = [1.0 / 3.0, 1.0 / 3.0];
+
+/// CIE D65 as BT.709 rounds it (x = 0.3127, y = 0.3290): the white of the sRGB display.
+pub const D65: Xy = REC709.white;
+
+/// The 3×3 identity, the "no chromatic adaptation" transform.
+pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+/// The CAT16 matrix from CIE XYZ to its sharpened cone space `M16` (Li et al. 2017, Eq. 4).
+pub const CAT16_XYZ_TO_LMS: Mat3 = [
+    [0.401288, 0.650173, -0.051461],
+    [-0.250268, 1.204414, 0.045854],
+    [-0.002079, 0.048952, 0.953127],
+];
+
+/// The XYZ, with Y = 1, of a chromaticity; `None` unless `y > 0` and both are finite.
+pub fn xyz_of_white(white: Xy) -> Option<[f64; 3]> {
+    let [x, y] = white;
+    (x.is_finite() && y.is_finite() && y > 0.0).then(|| [x / y, 1.0, (1.0 - x - y) / y])
+}
+
+/// Whether `white` can serve as an adopted white: finite, `x > 0`, `y > 0`, `x + y < 1`
+/// (inside the triangle of non-negative XYZ, so every cone response of it is positive).
+pub fn is_valid_white(white: Xy) -> bool {
+    let [x, y] = white;
+    x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0 && x + y < 1.0
+}
+
+/// The complete CAT16 von Kries transform, in CIE XYZ, from an observer adapted to `from` to
+/// one adapted to `to` (Li et al. 2017, Eq. 4–6 with `D = 1`):
+/// `M16⁻¹ · diag(M16·W_to / M16·W_from) · M16`, both whites with Y = 1. It maps `from` to
+/// `to` exactly, so neutrals keep their luminance. `None` if a white is not
+/// [valid](is_valid_white) or a cone response of it is not positive.
+pub fn cat16(from: Xy, to: Xy) -> Option<Mat3> {
+    if !(is_valid_white(from) && is_valid_white(to)) {
+        return None;
+    }
+    let m = CAT16_XYZ_TO_LMS;
+    let src = mul_vec(&m, xyz_of_white(from)?);
+    let dst = mul_vec(&m, xyz_of_white(to)?);
+    if src.iter().chain(&dst).any(|v| v.is_nan() || *v <= 0.0) {
+        return None;
+    }
+    let gain = [
+        [dst[0] / src[0], 0.0, 0.0],
+        [0.0, dst[1] / src[1], 0.0],
+        [0.0, 0.0, dst[2] / src[2]],
+    ];
+    Some(mul_mat(&invert(&m)?, &mul_mat(&gain, &m)))
+}
+
+/// The scene white the cone image is adapted from (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum WhitePoint {
+    /// The white the file declares ([`HdrImage::adopted_white`](crate::HdrImage)): Radiance
+    /// files the white of their `PRIMARIES=` (E by default), OpenEXR its `adoptedNeutral` or
+    /// `chromaticities` white (E for the paper's XYZ layout), PFM D65, the built-in chart E;
+    /// D65 (no change) when the image declares none.
+    #[default]
+    Auto,
+    /// No chromatic adaptation: XYZ goes to the display as it is (the paper's behaviour).
+    Off,
+    /// This chromaticity, whatever the file says.
+    Chromaticity(Xy),
+}
+
+impl std::str::FromStr for WhitePoint {
+    type Err = String;
+
+    /// `auto`, `none` (or `off`), `E`, `D65`, or a chromaticity `x,y` (case-insensitive
+    /// names).
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "auto" => Ok(WhitePoint::Auto),
+            "none" | "off" => Ok(WhitePoint::Off),
+            "e" => Ok(WhitePoint::Chromaticity(EQUAL_ENERGY)),
+            "d65" => Ok(WhitePoint::Chromaticity(D65)),
+            other => {
+                let bad = || format!("{s:?} is not auto, none, E, D65 or a chromaticity x,y");
+                let (x, y) = other.split_once(',').ok_or_else(bad)?;
+                let x: f64 = x.trim().parse().map_err(|_| bad())?;
+                let y: f64 = y.trim().parse().map_err(|_| bad())?;
+                if !is_valid_white([x, y]) {
+                    return Err(format!(
+                        "{s:?}: a white chromaticity needs x > 0, y > 0 and x + y < 1"
+                    ));
+                }
+                Ok(WhitePoint::Chromaticity([x, y]))
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for WhitePoint {
+    /// The form [`FromStr`](std::str::FromStr) reads.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            WhitePoint::Auto => f.write_str("auto"),
+            WhitePoint::Off => f.write_str("none"),
+            WhitePoint::Chromaticity(w) => write!(f, "{},{}", w[0], w[1]),
+        }
+    }
+}
+
+/// A short name for a white chromaticity: `E`, `D65`, or `x,y` to 4 decimals.
+pub fn white_name(white: Xy) -> String {
+    let near = |a: Xy| (white[0] - a[0]).abs() < 5e-5 && (white[1] - a[1]).abs() < 5e-5;
+    if near(EQUAL_ENERGY) {
+        "E".to_string()
+    } else if near(D65) {
+        "D65".to_string()
+    } else {
+        format!("{:.4},{:.4}", white[0], white[1])
+    }
+}
+
 impl Chromaticities {
     /// The matrix taking linear RGB in these primaries to CIE XYZ, normalised so that
     /// RGB = (1, 1, 1) has Y = 1 (SMPTE RP 177-1993, Sec. 3.3). Each primary's column is
@@ -64,6 +205,26 @@ impl Chromaticities {
             [p[2][0] * s[0], p[2][1] * s[1], p[2][2] * s[2]],
         ];
         m.iter().flatten().all(|v| v.is_finite()).then_some(m)
+    }
+}
+
+/// In place: linear (R, G, B) planes → CIE (X, Y, Z) planes through `m` (e.g.
+/// [`Chromaticities::rgb_to_xyz`]), times `scale`, in `f64`. Results beyond the `f32`
+/// range saturate to ±`f32::MAX`; NaN and infinities pass through.
+pub fn rgb_planes_to_xyz(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
+    let saturate = |v: f64| {
+        if v.is_finite() {
+            v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
+        } else {
+            v as f32
+        }
+    };
+    let m: Vec<f64> = m.iter().flatten().map(|v| v * scale).collect();
+    for ((pr, pg), pb) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
+        let (cr, cg, cb) = (f64::from(*pr), f64::from(*pg), f64::from(*pb));
+        *pr = saturate(m[0] * cr + m[1] * cg + m[2] * cb);
+        *pg = saturate(m[3] * cr + m[4] * cg + m[5] * cb);
+        *pb = saturate(m[6] * cr + m[7] * cg + m[8] * cb);
     }
 }
 
@@ -329,6 +490,71 @@ mod tests {
             white: REC709.white,
         };
         assert!(c.rgb_to_xyz().is_none());
+    }
+
+    #[test]
+    fn cat16_e_to_d65_matches_an_independent_computation() {
+        // colour-science 0.4.7, `chromatic_adaptation_VonKries(..., transform="CAT16")` from
+        // E (1/3, 1/3) to D65 (0.3127, 0.3290), as quoted to 5 decimals.
+        let expected = [
+            [0.98586, -0.04907, 0.01366],
+            [-0.00637, 1.00614, 0.00023],
+            [0.00011, 0.00394, 1.08500],
+        ];
+        let m = cat16(EQUAL_ENERGY, D65).unwrap();
+        for r in 0..3 {
+            for c in 0..3 {
+                assert!(
+                    (m[r][c] - expected[r][c]).abs() < 1e-4,
+                    "{r},{c}: {}",
+                    m[r][c]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn cat16_maps_white_to_white_and_keeps_its_luminance() {
+        for (from, to) in [
+            (EQUAL_ENERGY, D65),
+            (D65, EQUAL_ENERGY),
+            ([0.4476, 0.4074], D65),
+        ] {
+            let m = cat16(from, to).unwrap();
+            let w = mul_vec(&m, xyz_of_white(from).unwrap());
+            let t = xyz_of_white(to).unwrap();
+            for i in 0..3 {
+                assert!((w[i] - t[i]).abs() < 1e-12, "{from:?} -> {to:?}: {w:?}");
+            }
+        }
+        let same = cat16(D65, D65).unwrap();
+        for (r, row) in same.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                assert!((v - IDENTITY[r][c]).abs() < 1e-12);
+            }
+        }
+        assert!(cat16([0.0, 0.3], D65).is_none());
+        assert!(cat16([0.6, 0.5], D65).is_none());
+        assert!(cat16(D65, [f64::NAN, 0.3]).is_none());
+    }
+
+    #[test]
+    fn white_point_parses_names_and_chromaticities() {
+        let p = |s: &str| s.parse::<WhitePoint>();
+        assert_eq!(p("auto"), Ok(WhitePoint::Auto));
+        assert_eq!(p("none"), Ok(WhitePoint::Off));
+        assert_eq!(p("E"), Ok(WhitePoint::Chromaticity(EQUAL_ENERGY)));
+        assert_eq!(p("d65"), Ok(WhitePoint::Chromaticity(D65)));
+        assert_eq!(
+            p("0.4476,0.4074"),
+            Ok(WhitePoint::Chromaticity([0.4476, 0.4074]))
+        );
+        for bad in ["", "D50x", "0.3", "0.3,", "0,0.3", "0.7,0.5", "nan,0.3"] {
+            assert!(p(bad).is_err(), "{bad}");
+        }
+        assert_eq!(white_name(EQUAL_ENERGY), "E");
+        assert_eq!(white_name(D65), "D65");
+        assert_eq!(white_name([0.4476, 0.4074]), "0.4476,0.4074");
     }
 
     #[test]

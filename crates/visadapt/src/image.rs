@@ -32,6 +32,12 @@ pub struct HdrImage {
     /// False when the file only holds relative values (PFM, plain EXR RGB), which the
     /// caller should scale (the CLI's `--scale` / `--peak`).
     pub absolute_units: bool,
+    /// The chromaticity the scene's observer takes as white, as the file declares it
+    /// (Radiance `PRIMARIES=` white, E by default; OpenEXR `adoptedNeutral`, else the
+    /// `chromaticities` white; D65 for PFM; E for the built-in chart and the paper's XYZ
+    /// layout), or `None` when nothing says. The operator adapts the cone image from it to
+    /// the display white ([`colour::WhitePoint::Auto`](crate::colour::WhitePoint)).
+    pub adopted_white: Option<crate::colour::Xy>,
 }
 
 impl HdrImage {
@@ -47,6 +53,7 @@ impl HdrImage {
             scotopic: None,
             view: None,
             absolute_units: false,
+            adopted_white: None,
         }
     }
 
@@ -62,12 +69,22 @@ impl HdrImage {
 
     /// Multiply every luminance (X, Y, Z and scotopic) by `factor`, e.g. to turn relative
     /// values into cd/m².
+    /// Finite products too large for f32 saturate at ±`f32::MAX` instead of becoming
+    /// infinite (NaN and Inf samples stay what they are).
     pub fn scale(&mut self, factor: f32) {
+        let scale = |v: &mut f32| {
+            let p = *v * factor;
+            *v = if p.is_infinite() && v.is_finite() && factor.is_finite() {
+                f32::MAX.copysign(p)
+            } else {
+                p
+            };
+        };
         for plane in [&mut self.x, &mut self.y, &mut self.z] {
-            plane.iter_mut().for_each(|v| *v *= factor);
+            plane.iter_mut().for_each(scale);
         }
         if let Some(s) = &mut self.scotopic {
-            s.iter_mut().for_each(|v| *v *= factor);
+            s.iter_mut().for_each(scale);
         }
     }
 
@@ -88,13 +105,7 @@ impl HdrImage {
     /// # Ok::<(), visadapt::Error>(())
     /// ```
     pub fn peak_factor(&self, peak_cd_m2: f64, hot_pixel_fraction: f64) -> crate::Result<f64> {
-        if !(peak_cd_m2.is_finite() && peak_cd_m2 > 0.0) {
-            return Err(crate::Error::invalid(
-                "peak",
-                peak_cd_m2,
-                "must be a positive, finite number",
-            ));
-        }
+        crate::check_luminance("peak", peak_cd_m2)?;
         if !(0.0..1.0).contains(&hot_pixel_fraction) {
             return Err(crate::Error::invalid(
                 "hot-pixel-fraction",

@@ -14,6 +14,7 @@
 //! | [`scotopic`] | scotopic luminance from XYZ when no scotopic channel exists | Sec. 2.2, Fig. 2 |
 //! | [`spectral`] | CIE 1931, CIE 1951 V'(λ) and ColorChecker tables; spectral sensitivity | Sec. 2.2, 5, Fig. 2, 4 |
 //! | [`adaptation`] | world and display adaptation luminances | Sec. 4.4 |
+//! | [`glare`] | veiling glare: light scattered in the eye (CIE 135/1 glare spread function), before adaptation | Sec. 1 (cites Spencer et al. 1995) |
 //! | [`acuity`] | highest resolvable frequency and the acuity Gaussian | Sec. 4.1, Eq. 7, Fig. 7 |
 //! | [`blur`] | a Gaussian blur whose cost does not grow with sigma | Sec. 4.1 |
 //! | [`colour`] | RGB primaries, XYZ, sRGB output | Sec. 4 |
@@ -39,6 +40,7 @@ pub mod blur;
 pub mod chart;
 pub mod colour;
 mod error;
+pub mod glare;
 mod image;
 pub mod io;
 mod limits;
@@ -60,4 +62,4 @@ pub mod visibility;
 
 pub use error::{Error, LimitsExceeded, Result};
 pub use image::{DisplayImage, HdrImage, Projection, View};
-pub use limits::Limits;
+pub use limits::{Limits, MAX_LUMINANCE_CD_M2, check_factor, check_luminance};

@@ -4,6 +4,51 @@
 
 use crate::error::{Error, LimitsExceeded, Result};
 
+/// Largest luminance (cd/m², or scotopic cd/m²) a parameter may have: 1e19, just below
+/// √`f32::MAX` ≈ 1.84e19, so that the product of two such quantities stays finite in the
+/// f32 pipeline. Our bound; the brightest natural luminance, the sun's disc, is about
+/// 1.6e9 cd/m² (Wyszecki & Stiles, *Color Science*, 2nd ed., 1982, Table 1(4.4)).
+pub const MAX_LUMINANCE_CD_M2: f64 = 1e19;
+
+/// `v` for a message: in exponent form when it is very large or very small.
+fn number(v: f64) -> String {
+    if v.is_finite() && v != 0.0 && !(1e-6..1e16).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}
+
+/// Check a luminance parameter named `name` (as the CLI spells it): positive, finite and at
+/// most [`MAX_LUMINANCE_CD_M2`]. Returns it.
+pub fn check_luminance(name: &'static str, v: f64) -> Result<f64> {
+    if v.is_finite() && v > 0.0 && v <= MAX_LUMINANCE_CD_M2 {
+        Ok(v)
+    } else {
+        Err(Error::invalid(
+            name,
+            number(v),
+            format!(
+                "must be a positive luminance of at most {MAX_LUMINANCE_CD_M2:e} cd/m² (the range the f32 pipeline carries)"
+            ),
+        ))
+    }
+}
+
+/// Check a positive factor named `name` (e.g. `scale`): positive, finite and at most
+/// [`MAX_LUMINANCE_CD_M2`] (it multiplies luminances).
+pub fn check_factor(name: &'static str, v: f64) -> Result<f64> {
+    if v.is_finite() && v > 0.0 && v <= MAX_LUMINANCE_CD_M2 {
+        Ok(v)
+    } else {
+        Err(Error::invalid(
+            name,
+            number(v),
+            format!("must be a positive number of at most {MAX_LUMINANCE_CD_M2:e}"),
+        ))
+    }
+}
+
 /// Upper bounds on images the readers accept and on the memory they may use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {

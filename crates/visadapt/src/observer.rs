@@ -5,13 +5,13 @@
 //! the cone (Eq. 4) and rod (Eq. 5) thresholds, the scale factors that map the world to a
 //! display (Eq. 3), the mesopic rod weight (Eq. 6) and the resolvable frequency (Fig. 7).
 
+use crate::Result;
 use crate::acuity::{self, AcuityFilter};
 use crate::adaptation::{ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2};
 use crate::mesopic::rod_weight;
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic::EQUAL_ENERGY_SP_RATIO;
 use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
-use crate::{Error, Result};
 
 /// The visual state of an observer adapted to a luminance, seen on a display.
 #[derive(Debug, Clone, PartialEq)]
@@ -47,17 +47,7 @@ impl Observer {
         scotopic_adaptation_cd_m2: Option<f64>,
         display_max_cd_m2: Option<f64>,
     ) -> Result<Self> {
-        let check = |name, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(v)
-            } else {
-                Err(Error::invalid(
-                    name,
-                    v,
-                    "must be a positive, finite luminance",
-                ))
-            }
-        };
+        let check = crate::check_luminance;
         let l = check("adaptation", adaptation_cd_m2)?;
         let ls = check(
             "scotopic",

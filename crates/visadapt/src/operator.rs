@@ -3,6 +3,9 @@
 //!
 //! Ferwerda et al. 1996, Sec. 4, in this order:
 //!
+//! 0. optionally, veiling glare ([`glare`], beyond the paper, off by
+//!    default): light scattered in the eye is added to the world luminance, so that it
+//!    shows in the image and raises the adaptation of the next steps ([`prepare`]);
 //! 1. adaptation luminances (Sec. 4.4, [`adaptation`](crate::adaptation)): the world
 //!    observer's cones adapt to half the highest visible photopic luminance, the rods to
 //!    half the highest visible scotopic luminance; the display observer to half `L_dmax`;
@@ -11,7 +14,11 @@
 //! 3. the mesopic rod weight `k` (Eq. 6, [`mesopic`](crate::mesopic));
 //! 4. per pixel, the display colour `m_p·XYZ + k·m_s·V·white` (Eq. 6: the cone image keeps
 //!    its chromaticity, "the chromatic channels follow the same mapping"; the rod image is
-//!    grey, the display white), converted to linear sRGB relative to `L_dmax`;
+//!    grey, the display white), converted to linear sRGB relative to `L_dmax`. Beyond the
+//!    paper, the cone image is first taken from the scene's adopted white to the display
+//!    white by the CAT16 von Kries transform ([`colour`](crate::colour#chromatic-adaptation-beyond-the-paper),
+//!    [`ViewingConditions::white_point`]; [`WhitePoint::Off`] is the paper's behaviour); it
+//!    keeps neutrals' luminance exactly and is folded into the same per-pixel matrix;
 //! 5. the acuity Gaussian (Eq. 7, [`acuity`]), a separate stage on the
 //!    linear display planes. Because the mapping of step 4 is affine with coefficients
 //!    shared by all pixels, blurring its output equals mapping the blurred scene;
@@ -21,9 +28,10 @@
 //! scene stays dim. The mapping is linear in the scene (Eq. 1), so the display value of the
 //! world adaptation luminance is `m_p·L_wa` (+ rods) whatever the image.
 //!
-//! The split into [`plan`] (global quantities, the [`Report`]) and [`apply`] (per-pixel
-//! work with a given [`Mapping`]) lets a caller drive the mapping itself, e.g. from a
-//! time-varying adaptation state.
+//! The split into [`prepare`] (the scene stages and the global quantities, the
+//! [`Report`]) and [`apply`] (per-pixel work with a given [`Mapping`]) lets a caller drive
+//! the mapping itself, e.g. from a time-varying adaptation state. [`plan`] is `prepare`
+//! without the scene stages.
 //!
 //! With [`AdaptationMode::Local`] the stages are those of [`crate::local`]: an adaptation
 //! map after step 1, and steps 2-5 per pixel at each pixel's own adaptation (the global
@@ -34,13 +42,17 @@ use crate::acuity::{self, AcuityFilter};
 use crate::adaptation::{
     ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2, DEFAULT_HOT_PIXEL_FRACTION, highest_visible_of,
 };
-use crate::colour::xyz_to_linear_srgb_matrix;
+use crate::colour::{
+    self, D65, IDENTITY, Mat3, WhitePoint, Xy, mul_mat, xyz_to_linear_srgb_matrix,
+};
+use crate::glare::{self, Glare, VeilReport};
 use crate::local::{self, AdaptationMap, LocalAdaptation, LocalMapping, LocalReport};
 use crate::mesopic::rod_weight;
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
 use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
 use crate::{DisplayImage, Error, HdrImage, Result, View};
+use std::borrow::Cow;
 
 /// Horizontal field of view assumed when neither the caller nor the file gives one: 60°,
 /// a common rendering camera (a project choice, reported as such).
@@ -72,6 +84,13 @@ pub struct ViewingConditions {
     /// The view, overriding the file's; `None` to use the file's or a
     /// [`DEFAULT_FOV_DEG`] perspective view.
     pub view: Option<View>,
+    /// Veiling glare in the observer's eye ([`glare`]); `None` (the default,
+    /// the paper's operator) for none.
+    pub glare: Option<Glare>,
+    /// The scene white the cone image is adapted from to the display's D65 (CAT16, see
+    /// [`colour`](crate::colour#chromatic-adaptation-beyond-the-paper)); default
+    /// [`WhitePoint::Auto`], the file's; [`WhitePoint::Off`] for the paper's behaviour.
+    pub white_point: WhitePoint,
     /// One adaptation level for the scene (the paper's, the default) or one per pixel.
     pub adaptation: AdaptationMode,
 }
@@ -97,6 +116,8 @@ impl Default for ViewingConditions {
             acuity: true,
             view: None,
             adaptation: AdaptationMode::Global,
+            white_point: WhitePoint::Auto,
+            glare: None,
         }
     }
 }
@@ -104,13 +125,7 @@ impl Default for ViewingConditions {
 impl ViewingConditions {
     /// Check every parameter's domain.
     pub fn validate(&self) -> Result<()> {
-        let positive = |name, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(Error::invalid(name, v, "must be a positive, finite number"))
-            }
-        };
+        let positive = |name, v: f64| crate::check_luminance(name, v).map(|_| ());
         positive("display-max", self.display_max_cd_m2)?;
         if let Some(v) = self.display_adaptation_cd_m2 {
             positive("display-adaptation", v)?;
@@ -126,6 +141,15 @@ impl ViewingConditions {
                 "hot-pixel-fraction",
                 self.hot_pixel_fraction,
                 "must be in [0, 1)",
+            ));
+        }
+        if let WhitePoint::Chromaticity(w) = self.white_point
+            && !colour::is_valid_white(w)
+        {
+            return Err(Error::invalid(
+                "white-point",
+                format!("{},{}", w[0], w[1]),
+                "must be a chromaticity x,y with x > 0, y > 0 and x + y < 1",
             ));
         }
         if let Some(v) = &self.view
@@ -150,6 +174,9 @@ impl ViewingConditions {
                 v.horizontal_deg,
                 "a perspective view spans less than 180 degrees",
             ));
+        }
+        if let Some(g) = &self.glare {
+            g.validate()?;
         }
         if let AdaptationMode::Local(l) = &self.adaptation {
             l.validate()?;
@@ -191,6 +218,9 @@ pub struct Mapping {
     pub display_max_cd_m2: f64,
     /// Standard deviation of the acuity Gaussian in pixels; 0 for no blur.
     pub blur_sigma_px: f64,
+    /// The chromatic adaptation applied to the cone image's XYZ before it goes to the
+    /// display (CAT16 from the scene white to D65; [`IDENTITY`] for none).
+    pub chromatic_adaptation: Mat3,
 }
 
 /// Everything the operator used, with units.
@@ -233,6 +263,35 @@ pub struct Report {
     /// With local adaptation, the spread of the adaptation map (set by [`map`]; `None`
     /// from [`plan`], which computes the global quantities only).
     pub local: Option<LocalReport>,
+    /// The scene white the cone image was adapted from to D65; `None` when chromatic
+    /// adaptation is off ([`WhitePoint::Off`]).
+    pub scene_white: Option<Xy>,
+    /// Where `scene_white` came from: the caller, the file, or the default (D65, no
+    /// change, for an image that declares no white).
+    pub scene_white_source: Source,
+    /// What the glare stage did, when it ran ([`prepare`]).
+    pub glare: Option<GlareEffect>,
+}
+
+/// The glare stage's effect on the operator.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GlareEffect {
+    /// The veil itself: its size at the fixation point (image centre), the scattered
+    /// fraction, the grid.
+    pub veil: VeilReport,
+    /// World (cone) adaptation the scene would give without glare, cd/m² (the report's
+    /// `world_adaptation_cd_m2` is with it).
+    pub world_adaptation_without_glare_cd_m2: f64,
+    /// World rod adaptation without glare, scotopic cd/m².
+    pub world_adaptation_without_glare_scotopic_cd_m2: f64,
+}
+
+impl GlareEffect {
+    /// How many times the glare raised the cone adaptation level (1 when the adaptation
+    /// was given by the caller).
+    pub fn adaptation_raise(&self, report: &Report) -> f64 {
+        report.world_adaptation_cd_m2 / self.world_adaptation_without_glare_cd_m2
+    }
 }
 
 impl Report {
@@ -251,7 +310,18 @@ pub struct PixelStats {
     pub negative: usize,
     /// Pixels brighter than the display can show, scaled down (see [`apply`]).
     pub clipped: usize,
+    /// Pixels so bright (more than [`MAX_DISPLAY_RELATIVE`] times the display maximum)
+    /// that they were scaled down, chromaticity kept, before the mapping and the blur, so
+    /// that the f32 arithmetic stays finite. Also counted in `clipped`.
+    pub saturated: usize,
 }
+
+/// Largest display-relative value (1 = `L_dmax`) a pixel may have before the blur: pixels
+/// beyond it are scaled down to it, chromaticity kept (counted in
+/// [`PixelStats::saturated`]). Our bound: 1e30 leaves 3e8 of headroom below `f32::MAX`
+/// for the blur's intermediate sums, and such a pixel is white after clipping either way;
+/// its blurred light reaches only where the acuity Gaussian's weight exceeds 1e-30.
+pub const MAX_DISPLAY_RELATIVE: f32 = 1e30;
 
 /// The operator's result.
 #[derive(Debug, Clone)]
@@ -282,14 +352,14 @@ pub struct Output {
 /// # Ok::<(), visadapt::Error>(())
 /// ```
 pub fn map(image: &HdrImage, conditions: &ViewingConditions) -> Result<Output> {
-    let mut report = plan(image, conditions)?;
+    let (scene, mut report) = prepare(image, conditions)?;
     let (display, stats) = match conditions.adaptation {
-        AdaptationMode::Global => apply(image, &report.mapping),
+        AdaptationMode::Global => apply(&scene, &report.mapping),
         AdaptationMode::Local(options) => {
-            let map = local_map(image, &report, conditions, &options)?;
+            let map = local_map(&scene, &report, conditions, &options)?;
             let mapping = LocalMapping::steady_state(&map, &report, options.rod_saturation);
             let mut out = DisplayImage::default();
-            let stats = local::apply_into(image, &map, &mapping, &mut out);
+            let stats = local::apply_into(&scene, &map, &mapping, &mut out);
             report.local = Some(LocalReport::of(&map, options.rod_saturation));
             (out, stats)
         }
@@ -343,8 +413,51 @@ pub fn local_map(
     )
 }
 
+/// The operator's stages before the mapping: the scene stages the conditions switch on
+/// (glare), then [`plan`] on their result. Returns the scene to [`apply`] the mapping to
+/// (the input itself when no scene stage is on) and the report.
+///
+/// ```
+/// use visadapt::{HdrImage, glare::Glare, operator::{prepare, ViewingConditions}};
+/// // A night scene: 0.01 cd/m² everywhere and one headlight of 2e6 cd/m².
+/// let (w, h) = (320, 180);
+/// let mut scene = HdrImage::zeros(w, h);
+/// for i in 0..w * h {
+///     let l = if i == 90 * w + 200 { 2e6 } else { 0.01 };
+///     scene.x[i] = 0.9505 * l; scene.y[i] = l; scene.z[i] = 1.089 * l;
+/// }
+/// let glare = ViewingConditions { glare: Some(Glare::default()), ..Default::default() };
+/// let (retina, report) = prepare(&scene, &glare)?;
+/// let effect = report.glare.as_ref().unwrap();
+/// // The veil lifts the dark field near the light and raises the adaptation level.
+/// assert!(retina.y[90 * w + 180] > 10.0 * scene.y[90 * w + 180]);
+/// assert!(effect.adaptation_raise(&report) > 1.5);
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn prepare<'a>(
+    image: &'a HdrImage,
+    conditions: &ViewingConditions,
+) -> Result<(Cow<'a, HdrImage>, Report)> {
+    let Some(g) = &conditions.glare else {
+        return Ok((Cow::Borrowed(image), plan(image, conditions)?));
+    };
+    let without = plan(image, conditions)?;
+    let (retina, veil) = glare::apply(image, &without.view, g)?;
+    let mut report = plan(&retina, conditions)?;
+    // The glare stage writes a scotopic plane; where it came from is the input's business.
+    report.scotopic_source = without.scotopic_source;
+    report.view_source = without.view_source;
+    report.glare = Some(GlareEffect {
+        veil,
+        world_adaptation_without_glare_cd_m2: without.world_adaptation_cd_m2,
+        world_adaptation_without_glare_scotopic_cd_m2: without.world_adaptation_scotopic_cd_m2,
+    });
+    Ok((Cow::Owned(retina), report))
+}
+
 /// Compute the global quantities of the model for an image: adaptation levels, scale
-/// factors, `k`, acuity and blur size.
+/// factors, `k`, acuity and blur size. This does not run the scene stages (glare): see
+/// [`prepare`].
 pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> {
     image.check_consistent()?;
     conditions.validate()?;
@@ -405,6 +518,22 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
         ),
     };
     let ppd = view.pixels_per_degree(image.width);
+    let (scene_white, scene_white_source) = match (conditions.white_point, image.adopted_white) {
+        (WhitePoint::Off, _) => (None, Source::Caller),
+        (WhitePoint::Chromaticity(w), _) => (Some(w), Source::Caller),
+        (WhitePoint::Auto, Some(w)) => (Some(w), Source::File),
+        (WhitePoint::Auto, None) => (Some(D65), Source::Default),
+    };
+    let chromatic_adaptation = match scene_white {
+        Some(w) => colour::cat16(w, D65).ok_or_else(|| {
+            Error::invalid(
+                "white-point",
+                format!("{},{}", w[0], w[1]),
+                "is not a usable white chromaticity",
+            )
+        })?,
+        None => IDENTITY,
+    };
     let acuity = AcuityFilter::new(lwa, lwa_s);
     let blur_sigma_px = match (conditions.acuity, ppd) {
         (true, Some(ppd)) => {
@@ -434,6 +563,7 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
             scotopic_offset_cd_m2: 0.0,
             display_max_cd_m2: conditions.display_max_cd_m2,
             blur_sigma_px,
+            chromatic_adaptation,
         },
         acuity,
         acuity_applied: conditions.acuity,
@@ -441,37 +571,60 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
         view_source,
         pixels_per_degree: ppd,
         local: None,
+        glare: None,
+        scene_white,
+        scene_white_source,
     })
 }
 
 /// The rows of the cone image's matrix for `mapping` at a photopic scale `m_p`: linear sRGB
-/// from XYZ times `m_p / L_dmax`, as `f32`. The one place the cone matrix is built, for the
+/// from XYZ after the mapping's chromatic adaptation, times `m_p / L_dmax`, as `f32`
+/// (bounded by [`MAX_DISPLAY_RELATIVE`]). The one place the cone matrix is built, for the
 /// global operator and for the per-pixel tables of [`crate::local`].
 pub(crate) fn cone_rows(mapping: &Mapping, photopic_scale: f64) -> [[f32; 3]; 3] {
-    let xyz2rgb = xyz_to_linear_srgb_matrix();
+    let xyz2rgb = mul_mat(&xyz_to_linear_srgb_matrix(), &mapping.chromatic_adaptation);
     let s = photopic_scale / mapping.display_max_cd_m2;
-    xyz2rgb.map(|row| row.map(|v| (v * s) as f32))
+    let bound = f64::from(MAX_DISPLAY_RELATIVE);
+    xyz2rgb.map(|row| row.map(|v| (v * s).clamp(-bound, bound) as f32))
 }
 
 /// Per-pixel coefficients of the mapping, display-relative.
 #[derive(Clone, Copy)]
 struct Coefficients {
-    /// Rows: linear sRGB from XYZ, times `m_p / L_dmax`.
+    /// Rows: linear sRGB from XYZ after the chromatic adaptation, times `m_p / L_dmax`.
     cone: [[f32; 3]; 3],
     /// `k·m_s / L_dmax`, added equally to R, G, B (grey of the display white).
     rod: f32,
     /// `(b_p + k·b_s) / L_dmax`, added equally to R, G, B.
     offset: f32,
+    /// Largest input channel value (cd/m²) whose mapped value stays within
+    /// [`MAX_DISPLAY_RELATIVE`]: brighter pixels are scaled down to it first.
+    max_input: f32,
 }
 
 impl Coefficients {
     fn new(m: &Mapping) -> Self {
         let cone = cone_rows(m, m.photopic_scale);
+        let bound = f64::from(MAX_DISPLAY_RELATIVE);
+        let clamp = |v: f64| v.clamp(-bound, bound);
+        let rod = clamp(m.rod_weight * m.scotopic_scale / m.display_max_cd_m2);
+        let offset = clamp(
+            (m.photopic_offset_cd_m2 + m.rod_weight * m.scotopic_offset_cd_m2)
+                / m.display_max_cd_m2,
+        );
+        // The largest gain from a channel to an output: a row's absolute sum plus the rod
+        // coefficient (the scotopic estimate is at most about 2.3 Y + X + Z).
+        let gain = cone
+            .iter()
+            .map(|row| row.iter().map(|v| f64::from(v.abs())).sum::<f64>())
+            .fold(0.0, f64::max)
+            + 4.0 * rod.abs();
+        let max_input = max_input_for_gain(gain);
         Coefficients {
             cone,
-            rod: (m.rod_weight * m.scotopic_scale / m.display_max_cd_m2) as f32,
-            offset: ((m.photopic_offset_cd_m2 + m.rod_weight * m.scotopic_offset_cd_m2)
-                / m.display_max_cd_m2) as f32,
+            rod: rod as f32,
+            offset: offset as f32,
+            max_input,
         }
     }
 }
@@ -543,6 +696,7 @@ pub(crate) fn par_chunks(
         non_finite: a.non_finite + b.non_finite,
         negative: a.negative + b.negative,
         clipped: a.clipped + b.clipped,
+        saturated: a.saturated + b.saturated,
     };
     #[cfg(feature = "rayon")]
     {
@@ -580,7 +734,7 @@ fn map_chunk(
         &image.y[start..end],
         &image.z[start..end],
     );
-    let (mut non_finite, mut negative) = (0u32, 0u32);
+    let (mut non_finite, mut negative, mut saturated) = (0u32, 0u32, 0u32);
     // Two copies of one branch-free loop (file scotopic channel, or the XYZ estimate), so
     // that the compiler vectorises each.
     let out = r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut());
@@ -588,17 +742,21 @@ fn map_chunk(
         Some(s) => {
             let xyzs = xs.iter().zip(ys).zip(zs).zip(&s[start..end]);
             for ((((x, y), z), s), ((r, g), b)) in xyzs.zip(out) {
-                let (finite, neg, [x, y, z, s]) = sanitize([*x, *y, *z, *s]);
+                let (finite, neg, v) = sanitize([*x, *y, *z, *s]);
+                let (sat, [x, y, z, s]) = c.saturate(v);
                 non_finite += u32::from(!finite);
                 negative += u32::from(neg);
+                saturated += u32::from(sat);
                 (*r, *g, *b) = c.pixel(x, y, z, s);
             }
         }
         None => {
             for (((x, y), z), ((r, g), b)) in xs.iter().zip(ys).zip(zs).zip(out) {
-                let (finite, neg, [x, y, z, _]) = sanitize([*x, *y, *z, 0.0]);
+                let (finite, neg, v) = sanitize([*x, *y, *z, 0.0]);
+                let (sat, [x, y, z, _]) = c.saturate(v);
                 non_finite += u32::from(!finite);
                 negative += u32::from(neg);
+                saturated += u32::from(sat);
                 (*r, *g, *b) = c.pixel(x, y, z, scotopic::from_xyz(x, y, z));
             }
         }
@@ -607,6 +765,29 @@ fn map_chunk(
         non_finite: non_finite as usize,
         negative: negative as usize,
         clipped: 0,
+        saturated: saturated as usize,
+    }
+}
+
+/// Scale a (sanitised, non-negative) pixel down to `max_input` when a channel exceeds it,
+/// keeping the ratios of its channels; true when it did. Branch-free, to vectorise.
+#[inline(always)]
+pub(crate) fn saturate(v: [f32; 4], max_input: f32) -> (bool, [f32; 4]) {
+    let m = v[0].max(v[1]).max(v[2]).max(v[3]);
+    let over = m > max_input;
+    let k = if over { max_input / m } else { 1.0 };
+    (over, v.map(|c| c * k))
+}
+
+/// The largest input channel value whose mapped value stays within
+/// [`MAX_DISPLAY_RELATIVE`] for a largest channel-to-output `gain` (display-relative per
+/// cd/m²).
+pub(crate) fn max_input_for_gain(gain: f64) -> f32 {
+    let bound = f64::from(MAX_DISPLAY_RELATIVE);
+    if gain > 0.0 {
+        (bound / gain).min(f64::from(f32::MAX) / 4.0) as f32
+    } else {
+        f32::MAX / 4.0
     }
 }
 
@@ -625,6 +806,13 @@ pub(crate) fn sanitize(v: [f32; 4]) -> (bool, bool, [f32; 4]) {
 }
 
 impl Coefficients {
+    /// Scale a (sanitised, non-negative) pixel down to [`Coefficients::max_input`] when a
+    /// channel exceeds it, keeping the ratios of its channels. Branch-free, to vectorise.
+    #[inline(always)]
+    fn saturate(&self, v: [f32; 4]) -> (bool, [f32; 4]) {
+        saturate(v, self.max_input)
+    }
+
     /// Eq. 6 in linear display RGB for one pixel.
     #[inline(always)]
     fn pixel(&self, x: f32, y: f32, z: f32, scotopic: f32) -> (f32, f32, f32) {

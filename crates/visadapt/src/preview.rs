@@ -88,6 +88,7 @@ pub fn downsample_into(image: &HdrImage, width: usize, out: &mut HdrImage) -> Re
     out.height = h;
     out.view = image.view;
     out.absolute_units = image.absolute_units;
+    out.adopted_white = image.adopted_white;
     Ok(())
 }
 
@@ -113,7 +114,8 @@ pub fn mapping_at_width(mapping: &Mapping, full_width: usize, width: usize) -> M
 
 /// A plain exposure of the scene of `report`: world luminance times
 /// `L_dmax / highest visible luminance`, so that the highest visible luminance shows as the
-/// display maximum, with the scene's colours, no rod contribution and no blur. What a
+/// display maximum, with the scene's colours (adapted to the display white as the model's
+/// are), no rod contribution and no blur. What a
 /// camera set to expose the scene would show; the reference of an A/B comparison.
 pub fn exposure(report: &Report) -> Mapping {
     let display_max = report.mapping.display_max_cd_m2;
@@ -126,6 +128,8 @@ pub fn exposure(report: &Report) -> Mapping {
         scotopic_offset_cd_m2: 0.0,
         display_max_cd_m2: display_max,
         blur_sigma_px: 0.0,
+        // White-balanced as the model's image, so that an A/B split differs by the model.
+        chromatic_adaptation: report.mapping.chromatic_adaptation,
     }
 }
 

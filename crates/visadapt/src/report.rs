@@ -11,10 +11,11 @@
 //! Available with the `json` feature (on by default).
 
 use crate::Projection;
+use crate::acuity::snellen;
 use crate::local::{LocalReport, Quantiles};
 use crate::observer::Observer;
-use crate::operator::{PixelStats, Report, Source};
-use crate::timecourse::Moment;
+use crate::operator::{Mapping, PixelStats, Report, Source};
+use crate::timecourse::{Adaptation, Moment};
 use crate::visibility::{Difference, POOLING_EXPONENT, ToleranceSummary};
 use serde_json::{Value, json};
 
@@ -41,7 +42,9 @@ pub fn projection_label(p: Projection) -> &'static str {
 }
 
 /// The report of one [`operator::map`](crate::operator::map) run (`visadapt map --json`):
-/// adaptation levels, thresholds, scale factors, acuity, view and pixel counts.
+/// adaptation levels, thresholds, scale factors, acuity, view, the scene white the colours
+/// were adapted from (`scene_white`: `"E"`, `"D65"`, `"x,y"` or null when off) and pixel
+/// counts.
 /// `input_scale` is the factor the caller applied to the file's values to get cd/m²
 /// (1 when none).
 ///
@@ -87,6 +90,10 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
             "horizontal_fov_deg": r.view.horizontal_deg,
             "source": source_label(r.view_source),
         },
+        "glare": glare_json(r),
+        "scene_white_xy": r.scene_white,
+        "scene_white": r.scene_white.map(crate::colour::white_name),
+        "scene_white_source": source_label(r.scene_white_source),
         "pixels_non_finite": stats.non_finite,
         "pixels_negative": stats.negative,
         "pixels_clipped": stats.clipped,
@@ -114,6 +121,44 @@ pub fn local_json(l: &LocalReport) -> Value {
         "scotopic_adaptation_cd_m2": quantiles_json(&l.adaptation_scotopic_cd_m2),
         "rod_weight": quantiles_json(&l.rod_weight),
         "blur_sigma_px": l.acuity_sigma_px.as_ref().map(quantiles_json),
+    })
+}
+
+/// What the glare stage did ([`operator::prepare`](crate::operator::prepare) with
+/// `ViewingConditions::glare`), `null` when it was off: the observer, the veiling luminance
+/// at the fixation point (the image centre), the adaptation without glare and how many
+/// times the glare raised it, the fraction of every pixel's light scattered into the veil,
+/// and the convolution grid's cell and near radius.
+///
+/// ```
+/// use visadapt::{HdrImage, glare::Glare, operator::{map, ViewingConditions}, report};
+/// let mut scene = HdrImage::zeros(64, 36);
+/// scene.y.fill(0.01);
+/// scene.y[18 * 64 + 40] = 1e6;
+/// let conditions = ViewingConditions { glare: Some(Glare::default()), ..Default::default() };
+/// let out = map(&scene, &conditions)?;
+/// let v = report::map_json(&out.report, &out.stats, 1.0);
+/// assert_eq!(v["glare"]["age_years"], 25.0);
+/// assert!(v["glare"]["veil_at_fixation_cd_m2"].as_f64().unwrap() > 0.0);
+/// assert!(v["glare"]["adaptation_raise"].as_f64().unwrap() > 1.0);
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn glare_json(r: &Report) -> Value {
+    let Some(g) = &r.glare else {
+        return Value::Null;
+    };
+    json!({
+        "age_years": g.veil.glare.age_years,
+        "pigmentation": g.veil.glare.pigmentation,
+        "veil_at_fixation_cd_m2": g.veil.veil_at_centre_cd_m2,
+        "veil_at_fixation_scotopic_cd_m2": g.veil.veil_at_centre_scotopic_cd_m2,
+        "mean_veil_cd_m2": g.veil.mean_veil_cd_m2,
+        "adaptation_without_glare_cd_m2": g.world_adaptation_without_glare_cd_m2,
+        "scotopic_adaptation_without_glare_cd_m2": g.world_adaptation_without_glare_scotopic_cd_m2,
+        "adaptation_raise": g.adaptation_raise(r),
+        "scattered_fraction": g.veil.scattered_fraction,
+        "cell_deg": g.veil.cell_deg,
+        "near_radius_deg": g.veil.near_radius_deg,
     })
 }
 
@@ -157,6 +202,63 @@ pub fn moment_json(m: &Moment) -> Value {
     })
 }
 
+/// The state of an adapting observer ([`Adaptation`], Sec. 3.5): the world luminances it
+/// is exposed to, the current thresholds and their log10 excess over the steady state
+/// (Eq. 4, 5), the current acuity, the seconds since the world last changed and whether
+/// the adaptation is complete.
+pub fn adaptation_json(a: &Adaptation) -> Value {
+    json!({
+        "world_adaptation_cd_m2": a.world_cd_m2(),
+        "world_adaptation_scotopic_cd_m2": a.world_scotopic_cd_m2(),
+        "seconds_since_change": a.seconds_since_change(),
+        "adapted": a.is_adapted(),
+        "cone_threshold_cd_m2": a.cone_threshold_cd_m2(),
+        "rod_threshold_scotopic_cd_m2": a.rod_threshold_scotopic_cd_m2(),
+        "cone_excess_log": a.cone_excess_log(),
+        "rod_excess_log": a.rod_excess_log(),
+        "acuity_cycles_per_degree": a.acuity_cycles_per_degree(),
+    })
+}
+
+/// The report of an image mapped for an adapting observer: [`map_json`] of the
+/// steady-state `report` of the frame, with the thresholds, scale factors, rod weight and
+/// acuity of `state` and its Eq. 8–9 `mapping` (from [`Adaptation::mapping`]), plus the
+/// offsets (`offset_cd_m2` = `b_p + k·b_s`, `photopic_offset_cd_m2`,
+/// `scotopic_offset_cd_m2`, display cd/m²), `cone_excess_log`, `rod_excess_log` and
+/// `seconds_since_change`. Once the adaptation is complete it equals [`map_json`] plus
+/// zero offsets and excesses.
+pub fn adapting_map_json(
+    report: &Report,
+    stats: &PixelStats,
+    input_scale: f64,
+    state: &Adaptation,
+    mapping: &Mapping,
+) -> Value {
+    let now = Report {
+        mapping: *mapping,
+        cone_threshold_cd_m2: state.cone_threshold_cd_m2(),
+        rod_threshold_scotopic_cd_m2: state.rod_threshold_scotopic_cd_m2(),
+        ..report.clone()
+    };
+    let mut v = map_json(&now, stats, input_scale);
+    let acuity = state.acuity_cycles_per_degree();
+    let extra = json!({
+        "acuity_cycles_per_degree": acuity,
+        "snellen": snellen(acuity),
+        "cone_excess_log": state.cone_excess_log(),
+        "rod_excess_log": state.rod_excess_log(),
+        "seconds_since_change": state.seconds_since_change(),
+        "offset_cd_m2": mapping.photopic_offset_cd_m2
+            + mapping.rod_weight * mapping.scotopic_offset_cd_m2,
+        "photopic_offset_cd_m2": mapping.photopic_offset_cd_m2,
+        "scotopic_offset_cd_m2": mapping.scotopic_offset_cd_m2,
+    });
+    if let (Value::Object(v), Value::Object(extra)) = (&mut v, extra) {
+        v.extend(extra);
+    }
+    v
+}
+
 /// A whole time course (`visadapt timecourse --json`): one [`moment_json`] per time.
 pub fn timecourse_json(moments: &[Moment]) -> Value {
     Value::Array(moments.iter().map(moment_json).collect())
@@ -188,6 +290,7 @@ pub fn difference_json(d: &Difference, r: &Report, input_scale: f64, map: Option
         "horizontal_fov_deg": r.view.horizontal_deg,
         "input_scale": input_scale,
         "non_finite_pixels": d.non_finite_pixels,
+        "glare": glare_json(r),
         "map": map,
         "adaptation": if r.local.is_some() { "local" } else { "global" },
         "local": r.local.as_ref().map(local_json),
@@ -217,6 +320,7 @@ pub fn tolerance_json(
         "median_tolerance_cd_m2": summary.median_cd_m2,
         "max_tolerance_cd_m2": summary.max_cd_m2,
         "median_relative_tolerance": summary.median_relative,
+        "glare": glare_json(r),
         "input_scale": input_scale,
         "output": output,
         "adaptation": if r.local.is_some() { "local" } else { "global" },

@@ -61,13 +61,7 @@ impl Sequence {
     /// finite times.
     pub fn new(from_cd_m2: f64, to_cd_m2: f64, times_seconds: Vec<f64>) -> Result<Self> {
         for (name, v) in [("from", from_cd_m2), ("to", to_cd_m2)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::invalid(
-                    name,
-                    v,
-                    "must be a positive, finite luminance",
-                ));
-            }
+            crate::check_luminance(name, v)?;
         }
         check_times(&times_seconds)?;
         Ok(Sequence {
@@ -139,6 +133,7 @@ fn scaled_into(scene: &HdrImage, factor: f64, out: &mut HdrImage) {
     out.height = scene.height;
     out.view = scene.view;
     out.absolute_units = true;
+    out.adopted_white = scene.adopted_white;
 }
 
 /// Render a [`Sequence`] of `scene` (any units: it is rescaled to each level), calling
@@ -185,12 +180,14 @@ pub fn render(
     let mut out = DisplayImage::default();
 
     scaled_into(scene, sequence.from_cd_m2 / hv, &mut lit);
-    let before = operator::plan(&lit, conditions)?;
+    let (retina, before) = operator::prepare(&lit, conditions)?;
     let mut eye = Adaptation::adapted(
         before.world_adaptation_cd_m2,
         before.world_adaptation_scotopic_cd_m2,
     )?;
-    let (mapping, stats) = operator::apply_state_into(&lit, &before, &eye, conditions, &mut out)?;
+    let (mapping, stats) =
+        operator::apply_state_into(&retina, &before, &eye, conditions, &mut out)?;
+    drop(retina);
     on_frame(&Frame {
         index: 0,
         t_seconds: None,
@@ -202,14 +199,14 @@ pub fn render(
     })?;
 
     scaled_into(scene, sequence.to_cd_m2 / hv, &mut lit);
-    let after = operator::plan(&lit, conditions)?;
+    let (retina, after) = operator::prepare(&lit, conditions)?;
     eye.step_to(0.0, &after)?;
     let mut now = 0.0;
     for (i, &t) in sequence.times_seconds.iter().enumerate() {
         eye.step_to(t - now, &after)?;
         now = t;
         let (mapping, stats) =
-            operator::apply_state_into(&lit, &after, &eye, conditions, &mut out)?;
+            operator::apply_state_into(&retina, &after, &eye, conditions, &mut out)?;
         on_frame(&Frame {
             index: i + 1,
             t_seconds: Some(t),

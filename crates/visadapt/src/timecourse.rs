@@ -526,7 +526,8 @@ impl Adaptation {
 
     /// The Eq. 8–9 mapping for the current state on a display of `display_max_cd_m2`
     /// whose observer is adapted to `display_adaptation_cd_m2`, with an acuity blur of
-    /// `blur_sigma_px` (the steady-state one for the current world, see the module docs).
+    /// `blur_sigma_px` (the steady-state one for the current world, see the module docs),
+    /// without chromatic adaptation ([`Adaptation::mapping`] carries a report's).
     pub fn mapping_for(
         &self,
         display_max_cd_m2: f64,
@@ -549,6 +550,7 @@ impl Adaptation {
             scotopic_offset_cd_m2: ls * (scotopic_scale(ls, lda) - ms),
             display_max_cd_m2,
             blur_sigma_px,
+            chromatic_adaptation: crate::colour::IDENTITY,
         }
     }
 
@@ -557,11 +559,14 @@ impl Adaptation {
     /// to that report's world adaptation first ([`Adaptation::step_to`]); once the
     /// adaptation is complete the result is exactly `steady.mapping`.
     pub fn mapping(&self, steady: &Report) -> Mapping {
-        self.mapping_for(
-            steady.mapping.display_max_cd_m2,
-            steady.display_adaptation_cd_m2,
-            steady.mapping.blur_sigma_px,
-        )
+        Mapping {
+            chromatic_adaptation: steady.mapping.chromatic_adaptation,
+            ..self.mapping_for(
+                steady.mapping.display_max_cd_m2,
+                steady.display_adaptation_cd_m2,
+                steady.mapping.blur_sigma_px,
+            )
+        }
     }
 }
 
@@ -617,13 +622,7 @@ pub fn course(
     display_max_cd_m2: f64,
 ) -> Result<Vec<Moment>> {
     check_times(times_seconds)?;
-    if !(display_max_cd_m2.is_finite() && display_max_cd_m2 > 0.0) {
-        return Err(Error::invalid(
-            "display-max",
-            display_max_cd_m2,
-            "must be a positive, finite number",
-        ));
-    }
+    crate::check_luminance("display-max", display_max_cd_m2)?;
     let lda = crate::adaptation::ADAPTATION_FRACTION * display_max_cd_m2;
     let mut eye = Adaptation::adapted(from.0, from.1)?;
     eye.step(0.0, to.0, to.1)?;

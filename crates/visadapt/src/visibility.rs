@@ -157,13 +157,7 @@ impl Sensitivity {
             ("cone-threshold", self.cone_threshold_cd_m2),
             ("rod-threshold", self.rod_threshold_scotopic_cd_m2),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::invalid(
-                    name,
-                    v,
-                    "must be a positive, finite luminance",
-                ));
-            }
+            crate::check_luminance(name, v)?;
         }
         if !(0.0..=1.0).contains(&self.rod_weight) {
             return Err(Error::invalid(
@@ -341,7 +335,8 @@ pub struct Viewer<'a> {
 
 impl Viewer<'static> {
     /// The observer the operator would use for `image` under `conditions` (adaptation by
-    /// Sec. 4.4 or as given, acuity from the view), with the report of [`operator::plan`].
+    /// Sec. 4.4 or as given, acuity from the view, raised by the veil when the conditions
+    /// switch glare on), with the report of [`operator::prepare`].
     pub fn for_image(image: &HdrImage, conditions: &ViewingConditions) -> Result<(Self, Report)> {
         if let operator::AdaptationMode::Local(_) = conditions.adaptation {
             return Err(Error::invalid(
@@ -350,7 +345,7 @@ impl Viewer<'static> {
                 "needs its adaptation map: use Observation::for_image",
             ));
         }
-        let report = operator::plan(image, conditions)?;
+        let (_, report) = operator::prepare(image, conditions)?;
         Ok((Viewer::from_report(&report), report))
     }
 
@@ -421,7 +416,7 @@ impl Viewer<'_> {
 /// (the report's `local` part filled in). [`Observation::viewer`] is the [`Viewer`].
 #[derive(Debug, Clone)]
 pub struct Observation {
-    /// What the model used (the [`operator::plan`] of the image).
+    /// What the model used (the [`operator::prepare`] report of the image).
     pub report: Report,
     /// The adaptation map, with local adaptation.
     pub map: Option<AdaptationMap>,
@@ -429,13 +424,14 @@ pub struct Observation {
 
 impl Observation {
     /// The observation of `image` under `conditions` (adaptation by Sec. 4.4 or as given,
-    /// globally or locally, acuity from the view).
+    /// globally or locally, acuity from the view; with glare, of the veiled retinal image,
+    /// as [`operator::prepare`] makes it).
     pub fn for_image(image: &HdrImage, conditions: &ViewingConditions) -> Result<Self> {
-        let mut report = operator::plan(image, conditions)?;
+        let (retina, mut report) = operator::prepare(image, conditions)?;
         let map = match conditions.adaptation {
             operator::AdaptationMode::Global => None,
             operator::AdaptationMode::Local(options) => {
-                let map = operator::local_map(image, &report, conditions, &options)?;
+                let map = operator::local_map(&retina, &report, conditions, &options)?;
                 report.local = Some(crate::local::LocalReport::of(&map, options.rod_saturation));
                 Some(map)
             }

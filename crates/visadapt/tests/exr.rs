@@ -108,6 +108,8 @@ fn hdr_writer_round_trips_exactly_with_scotopic() {
         scotopic: Some((0..n).map(|i| 2.5e4 - i as f32).collect()),
         view: None,
         absolute_units: true,
+        // The paper's layout reads back with its equal-energy white.
+        adopted_white: Some(visadapt::colour::EQUAL_ENERGY),
     };
     let mut buf = Cursor::new(Vec::new());
     vexr::write_hdr(&img, &mut buf).unwrap();

@@ -216,6 +216,31 @@ fn purkinje_shift_reverses_red_and_blue() {
     assert!((y(p004, RED_PATCH) / y(p004, BLUE_PATCH) - 2.15).abs() < 0.05);
 }
 
+/// The chart is lit by the paper's equal-energy illuminant (Sec. 5); with the CAT16
+/// adaptation from E to the display's D65 (issue 8 §1) its neutral patches are neutral
+/// against the display white itself, not only against the displayed white patch: C*ab < 1.5
+/// at every level (the rods add display-white grey, which is neutral too).
+#[test]
+fn neutral_patches_are_neutral_against_d65() {
+    let n = [0.4124 + 0.3576 + 0.1805, 1.0, 0.0193 + 0.1192 + 0.9505];
+    let f = |t: f64| {
+        if t > 216.0 / 24389.0 {
+            t.cbrt()
+        } else {
+            (24389.0 / 27.0 * t + 16.0) / 116.0
+        }
+    };
+    for p in panels() {
+        for index in WHITE_PATCH..=BLACK_PATCH {
+            let v = mean_xyz(&p.out.image, &p.chart.layout.patches[index].rect);
+            let (fx, fy, fz) = (f(v[0] / n[0]), f(v[1] / n[1]), f(v[2] / n[2]));
+            let c = (500.0 * (fx - fy)).hypot(200.0 * (fy - fz));
+            println!("{} cd/m²: patch {index} C* {c:.3}", p.level);
+            assert!(c < 1.5, "{} cd/m², patch {index}: C* {c}", p.level);
+        }
+    }
+}
+
 /// Sec. 5, panel (c): "the blues and greens have become completely achromatic". A colour
 /// difference below ΔE*ab ≈ 2.3 is about one just-noticeable difference (Sharma 2003,
 /// *Digital Color Imaging Handbook*, §1.7; Mahy et al. 1994), the threshold used here.

@@ -429,9 +429,10 @@ fn display_value_of_the_adaptation_luminance_is_constant_in_pixels() {
     .unwrap();
     let lwa = report.world_adaptation_cd_m2 as f32;
     let mut grey = HdrImage::zeros(4, 1);
-    // D65 white at L_wa, and at 0 and 2 L_wa for contrast.
+    // The scene's white (E, the Radiance file's; the report adapts it to the display's
+    // D65) at L_wa, and at 0 and 2 L_wa for contrast.
     for (i, l) in [lwa, lwa, 0.0, 2.0 * lwa].into_iter().enumerate() {
-        (grey.x[i], grey.y[i], grey.z[i]) = (0.950_47 * l, l, 1.088_83 * l);
+        (grey.x[i], grey.y[i], grey.z[i]) = (l, l, l);
     }
     grey.scotopic = Some(vec![
         report.world_adaptation_scotopic_cd_m2 as f32,

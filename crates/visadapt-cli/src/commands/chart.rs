@@ -7,12 +7,7 @@ use visadapt::chart::{Chart, ChartOptions};
 use visadapt::io;
 
 pub fn run(args: ChartArgs) -> anyhow::Result<()> {
-    if !(args.white.is_finite() && args.white > 0.0) {
-        bail!(
-            "invalid --white {}: must be a positive, finite luminance in cd/m²",
-            args.white
-        );
-    }
+    super::timecourse::positive("--white", args.white)?;
     let is_exr = args
         .output
         .extension()

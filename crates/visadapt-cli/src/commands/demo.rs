@@ -32,12 +32,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         bail!("--levels: give at least one luminance");
     }
     for &l in &args.levels {
-        if !(l.is_finite() && l > 0.0) {
-            bail!("invalid level {l}: must be a positive, finite luminance in cd/m²");
-        }
+        super::timecourse::positive("--levels", l)?;
     }
+    // The paper's observer, with veiling glare and local adaptation when asked for.
     let conditions = ViewingConditions {
         adaptation: args.adaptation.mode(),
+        glare: args.glare.glare(),
         ..ViewingConditions::default()
     };
     conditions.validate()?;
@@ -81,7 +81,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
                 "{what}: {} to {} cd/m²",
                 seq.from_cd_m2, seq.to_cd_m2
             ));
-            render_sequence(&chart, name, seq, &args.output, &progress, &conditions)?;
+            render_sequence(&chart, name, seq, &args.output, &conditions, &progress)?;
             written.push(format!(
                 "  {what} (Fig. 12): {} -> {} cd/m², frames {name}-0.png (adapted) to {name}-{}.png at {} s, animated {name}.apng",
                 seq.from_cd_m2,
@@ -119,8 +119,8 @@ fn render_sequence(
     name: &str,
     seq: &Sequence,
     dir: &Path,
-    progress: &ProgressBar,
     conditions: &ViewingConditions,
+    progress: &ProgressBar,
 ) -> anyhow::Result<()> {
     let path = dir.join(format!("{name}.apng"));
     let mut apng = ApngWriter::create(

@@ -12,9 +12,12 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
     io::output::refuse_same_file(&args.output, &[&args.input])?;
     super::check_output_folder(&args.output)?;
     let format = output_format(&args)?;
-    let conditions =
-        args.viewing
-            .conditions(Some(&args.display), Some(&args.world), Some(&args.view));
+    let conditions = args.viewing.conditions(
+        Some(&args.display),
+        Some(&args.world),
+        Some(&args.view),
+        Some(&args.colour),
+    );
     conditions.validate()?;
 
     let progress = ProgressBar::new(3).with_style(

@@ -32,9 +32,12 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
         let frame = args.output.join(frame_name(index, count));
         io::output::refuse_same_file(&frame, &[&args.input])?;
     }
-    let conditions = args
-        .viewing
-        .conditions(Some(&args.display), None, Some(&args.view));
+    let conditions = args.viewing.conditions(
+        Some(&args.display),
+        None,
+        Some(&args.view),
+        Some(&args.colour),
+    );
     conditions.validate()?;
 
     let scene = io::read(&args.input, &args.limits.limits())
@@ -64,6 +67,8 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
         None => None,
     };
     let mut written: Vec<(PathBuf, Option<f64>, f64, f64)> = Vec::new();
+    // The chromatic adaptation (the same for every frame: it depends on the file only).
+    let mut white: Option<(String, Option<String>)> = None;
     // The file an error happened on, to name it in the message.
     let mut failed: Option<PathBuf> = None;
     let result = render(&scene, &sequence, &conditions, |frame| {
@@ -74,6 +79,12 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
             a.push(frame.image)
                 .inspect_err(|_| failed = Some(apng_path.clone()))?;
         }
+        white.get_or_insert_with(|| {
+            (
+                crate::report::white_point(frame.report),
+                frame.report.scene_white.map(visadapt::colour::white_name),
+            )
+        });
         let m = &frame.mapping;
         let offset = m.photopic_offset_cd_m2 + m.rod_weight * m.scotopic_offset_cd_m2;
         written.push((path, frame.t_seconds, m.photopic_scale, offset));
@@ -101,11 +112,15 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
             "from_cd_m2": from,
             "to_cd_m2": to,
             "frames": frames,
+            "scene_white": white.as_ref().and_then(|w| w.1.clone()),
             "apng": args.apng.as_ref().map(|p| p.display().to_string()),
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!("scene lit at {from} cd/m², then {to} cd/m² (highest visible luminance)");
+        if let Some((text, _)) = &white {
+            println!("white point: {text}");
+        }
         for (p, t, mp, b) in &written {
             let when = match t {
                 Some(t) => format!("t = {t} s"),

@@ -7,12 +7,10 @@ use visadapt::report;
 use visadapt::scotopic::EQUAL_ENERGY_SP_RATIO;
 use visadapt::timecourse::{Moment, course};
 
-/// Check a luminance flag: positive and finite.
-pub fn positive(flag: &str, v: f64) -> anyhow::Result<f64> {
-    if !(v.is_finite() && v > 0.0) {
-        bail!("invalid {flag} {v}: must be a positive, finite luminance in cd/m²");
-    }
-    Ok(v)
+/// Check a luminance flag: positive, at most [`visadapt::MAX_LUMINANCE_CD_M2`] (the range
+/// the f32 pipeline carries).
+pub fn positive(flag: &'static str, v: f64) -> anyhow::Result<f64> {
+    Ok(visadapt::check_luminance(flag, v)?)
 }
 
 /// Check a list of times: finite, non-negative, sorted.
@@ -33,12 +31,7 @@ pub fn sorted_times(times: &[f64]) -> anyhow::Result<()> {
 pub fn run(args: TimecourseArgs) -> anyhow::Result<()> {
     let from = positive("--from", args.from)?;
     let to = positive("--to", args.to)?;
-    if !(args.display.display_max.is_finite() && args.display.display_max > 0.0) {
-        bail!(
-            "invalid --display-max {}: must be a positive, finite number",
-            args.display.display_max
-        );
-    }
+    positive("--display-max", args.display.display_max)?;
     sorted_times(&args.times)?;
     let sp = EQUAL_ENERGY_SP_RATIO;
     let moments = course(

@@ -27,7 +27,7 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     let conditions = ViewingConditions {
         // The tolerance holds for errors of any extent; acuity does not enter it.
         acuity: false,
-        ..args.viewing.conditions(None, Some(&args.world), None)
+        ..args.viewing.conditions(None, Some(&args.world), None, None)
     };
     conditions.validate()?;
 

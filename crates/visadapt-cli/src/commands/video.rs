@@ -136,9 +136,12 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             args.fps
         );
     }
-    let conditions = args
-        .viewing
-        .conditions(Some(&args.display), None, Some(&args.view));
+    let conditions = args.viewing.conditions(
+        Some(&args.display),
+        None,
+        Some(&args.view),
+        Some(&args.colour),
+    );
     conditions.validate()?;
     let (format, ext) = match args.format {
         VideoFormat::Png => (OutputFormat::Png { bits: 8 }, "png"),
@@ -204,7 +207,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             view: args.view.view(hdr.width, hdr.height),
             ..conditions.clone()
         };
-        let report = operator::plan(&hdr, &conditions).with_context(what)?;
+        let (scene, report) = operator::prepare(&hdr, &conditions).with_context(what)?;
         let state = match eye.as_mut() {
             None => eye.insert(Adaptation::adapted(
                 report.world_adaptation_cd_m2,
@@ -216,8 +219,9 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             }
         };
         let (mapping, _) =
-            operator::apply_state_into(&hdr, &report, state, &conditions, &mut display)
+            operator::apply_state_into(&scene, &report, state, &conditions, &mut display)
                 .with_context(what)?;
+        drop(scene);
         let out = out_path(input);
         io::write_display(&display, &out, format).with_context(|| out.display().to_string())?;
         if args.json {
@@ -237,6 +241,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
                 "rod_weight": mapping.rod_weight,
                 "offset_cd_m2": offset,
                 "acuity_cycles_per_degree": state.acuity_cycles_per_degree(),
+                "glare": visadapt::report::glare_json(&report),
             });
             println!("{line}");
         }

@@ -10,7 +10,7 @@ use plotters::style::RGBColor;
 use std::path::Path;
 use visadapt::HdrImage;
 use visadapt::io;
-use visadapt::operator::{Report, ViewingConditions};
+use visadapt::operator::{self, Report, ViewingConditions};
 use visadapt::visibility::{self, Difference, Observation};
 
 pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
@@ -26,7 +26,7 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     };
     let conditions = args
         .viewing
-        .conditions(None, Some(&args.world), Some(&args.view));
+        .conditions(None, Some(&args.world), Some(&args.view), None);
     conditions.validate()?;
 
     let limits = args.limits.limits();
@@ -55,6 +55,15 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     };
     let observation = Observation::for_image(&reference, &conditions)?;
     let (viewer, report) = (observation.viewer(), &observation.report);
+    // With --glare the two images are compared as they reach the retina, each with its
+    // own veil (the observer adapted to the reference's, above).
+    let (reference, test) = if conditions.glare.is_some() {
+        let (r, _) = operator::prepare(&reference, &conditions)?;
+        let (t, _) = operator::prepare(&test, &conditions)?;
+        (r.into_owned(), t.into_owned())
+    } else {
+        (reference, test)
+    };
     let d = visibility::difference(&reference, &test, &viewer)?;
     if d.non_finite_pixels > 0 {
         log::warn!(

@@ -30,6 +30,10 @@
 //! 5. Two of `R`, `G`, `B`: the missing one is taken as 0, as OpenEXR's `RgbaInputFile`
 //!    does.
 //!
+//! Adopted white ([`HdrImage::adopted_white`], what the operator adapts from): the
+//! `adoptedNeutral` attribute when present, else the white of `chromaticities` (D65 when
+//! absent); for rule 1 (the paper's layout) equal energy, the paper's illuminant (Sec. 5).
+//!
 //! Units: when the part has a positive, finite `whiteLuminance` attribute (the luminance in
 //! cd/m² of RGB (1, 1, 1), OpenEXR `ImfStandardAttributes.h`), rules 2–5 multiply by it and
 //! the image is marked absolute; otherwise values are taken as cd/m² as they stand and
@@ -40,10 +44,14 @@
 //!
 //! Safety against damaged files: the header is read first, the data window is checked
 //! against [`Limits`] and the channel count against [`MAX_CHANNELS`] before any pixel
-//! memory is allocated; chunk offsets and sizes are checked against the file length; the
-//! `exr` crate's decompressors run under `catch_unwind`, so a panic inside them becomes
-//! [`Error::Decode`] (the panic hook is left alone, so the default hook may still print a
-//! message to stderr).
+//! memory is allocated; the planes, and every decompressed block in flight, are checked
+//! against the memory budget ([`Limits::max_memory_bytes`]) before they are allocated
+//! (the `exr` crate allocates a whole decompressed block before reading its data, and a
+//! failed allocation aborts the process); chunk offsets and sizes are checked against the
+//! file length. Each call into the `exr` crate runs under `catch_unwind`, so a panic
+//! inside it becomes [`Error::Decode`], and prints nothing (the process's panic hook is
+//! wrapped once to stay silent for those panics only); this module's own code is not
+//! guarded, so a bug in it is not mistaken for a corrupt file.
 //!
 //! # Writing
 //!
@@ -91,7 +99,7 @@ const CHROMA_FILTER: [f32; 14] = [
 /// Decode an OpenEXR file held in memory (see the [module documentation](self) for the
 /// rules).
 pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
-    guarded(|| decode_unguarded(bytes, limits))
+    decode_checked(bytes, limits)
 }
 
 /// Most bytes of a chunk header: part number (4), tile coordinates (16), data size (4)
@@ -106,7 +114,7 @@ const MAX_CHUNK_HEADER: u64 = 40;
 pub(crate) fn file_len_bound(head: &[u8]) -> Option<u64> {
     let mut cursor = Cursor::new(head);
     let meta =
-        guarded(|| MetaData::read_from_buffered(&mut cursor, false).map_err(exr_error)).ok()?;
+        foreign(|| MetaData::read_from_buffered(&mut cursor, false).map_err(exr_error)).ok()?;
     let mut total = cursor.position();
     for h in &meta.headers {
         if h.deep {
@@ -127,10 +135,31 @@ pub(crate) fn file_len_bound(head: &[u8]) -> Option<u64> {
     Some(total)
 }
 
-/// Run `f`, turning a panic (in the `exr` crate, on damaged data) into a decode error.
-fn guarded<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
-    std::panic::catch_unwind(AssertUnwindSafe(f))
-        .unwrap_or_else(|_| Err(Error::decode(FORMAT, "corrupt file (decoder failure)")))
+thread_local! {
+    /// Whether this thread is inside [`foreign`] (its panics are reported as errors, not
+    /// printed).
+    static IN_FOREIGN: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Run `f`, a call into the `exr` crate on file data, turning a panic there into a decode
+/// error. Only calls into the foreign decoder are guarded: a panic in this module's own
+/// code is a bug and propagates. The first call wraps the process's panic hook (once) so
+/// that it stays silent for panics caught here and behaves as before for every other;
+/// stderr then carries only the caller's one-line error.
+fn foreign<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
+    static QUIET_HOOK: std::sync::Once = std::sync::Once::new();
+    QUIET_HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !IN_FOREIGN.with(std::cell::Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    let outer = IN_FOREIGN.with(|c| c.replace(true));
+    let result = std::panic::catch_unwind(AssertUnwindSafe(f));
+    IN_FOREIGN.with(|c| c.set(outer));
+    result.unwrap_or_else(|_| Err(Error::decode(FORMAT, "corrupt file (decoder failure)")))
 }
 
 /// The channels of a part that the image is made from, as indices into its channel list.
@@ -261,9 +290,9 @@ struct PendingBlock<'a> {
     expected_len: usize,
 }
 
-fn decode_unguarded(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
+fn decode_checked(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
     let mut cursor = Cursor::new(bytes);
-    let meta = MetaData::read_from_buffered(&mut cursor, false).map_err(exr_error)?;
+    let meta = foreign(|| MetaData::read_from_buffered(&mut cursor, false).map_err(exr_error))?;
     // The header reader consumes exactly the headers (it only peeks at the terminating
     // null bytes), so the chunk offset tables start here.
     let tables_start = usize::try_from(cursor.position()).map_err(|_| invalid("header"))?;
@@ -311,9 +340,20 @@ fn decode_unguarded(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
         )));
     }
     validate_header(header, meta.headers.len() > 1, &layout)?;
+    // The budget: the file's bytes, the planes read, and up to three more planes for the
+    // conversion to XYZ (missing RGB channels, upsampled chroma).
+    let plane_bytes = (n as u64).checked_mul(4);
+    let planes_total = plane_bytes
+        .and_then(|p| p.checked_mul(layout.channels().len() as u64 + 3))
+        .and_then(|p| p.checked_add(bytes.len() as u64));
+    limits.check_memory("the decoded planes", planes_total)?;
+    let budget = Budget {
+        limits,
+        spare: limits.max_memory_bytes - planes_total.unwrap_or(0),
+    };
 
     let pending = collect_blocks(bytes, &meta, tables_start, index)?;
-    let planes = decompress_and_scatter(header, &layout, &pending)?;
+    let planes = decompress_and_scatter(header, &layout, &pending, &budget)?;
     debug_assert_eq!(planes.first().map(Vec::len), Some(n));
     to_hdr(header, &layout, planes, width, height)
 }
@@ -378,9 +418,11 @@ fn validate_header(header: &Header, multipart: bool, layout: &Layout) -> Result<
         checked = std::borrow::Cow::Owned(copy);
     }
     let mut long_names = false;
-    checked
-        .validate(multipart, &mut long_names, false)
-        .map_err(exr_error)
+    foreign(|| {
+        checked
+            .validate(multipart, &mut long_names, false)
+            .map_err(exr_error)
+    })
 }
 
 /// Bytes of one decompressed block covering `rect` (relative to the data window), with
@@ -463,9 +505,11 @@ fn collect_blocks<'a>(
                 if rel < 0 || rel % lines != 0 {
                     return Err(invalid(format!("scan line block at y = {y}")));
                 }
-                header
-                    .get_scan_line_block_tile_coordinates(y)
-                    .map_err(exr_error)?
+                foreign(|| {
+                    header
+                        .get_scan_line_block_tile_coordinates(y)
+                        .map_err(exr_error)
+                })?
             }
             BlockDescription::Tiles(_) => {
                 let mut c = [0usize; 4];
@@ -493,10 +537,13 @@ fn collect_blocks<'a>(
             .checked_add(size)
             .and_then(|end| bytes.get(pos..end))
             .ok_or_else(|| invalid("file is truncated (chunk data)"))?;
-        let rect = header
-            .get_absolute_block_pixel_coordinates(coords)
-            .map_err(exr_error)?;
-        rect.validate(Some(header.layer_size)).map_err(exr_error)?;
+        let rect = foreign(|| {
+            let rect = header
+                .get_absolute_block_pixel_coordinates(coords)
+                .map_err(exr_error)?;
+            rect.validate(Some(header.layer_size)).map_err(exr_error)?;
+            Ok(rect)
+        })?;
         if rect.position.0 < 0
             || rect.position.1 < 0
             || rect.end().0 as i64 > w as i64
@@ -526,8 +573,45 @@ fn collect_blocks<'a>(
     Ok(pending)
 }
 
-/// Map `f` over `items`, in parallel with the `rayon` feature. A panic in `f` reaches the
-/// caller (rayon re-raises it), where [`guarded`] catches it.
+/// What is left of the memory budget for decompression once the planes are counted.
+#[derive(Debug)]
+struct Budget<'a> {
+    limits: &'a Limits,
+    /// Bytes available for the blocks in flight (compressed copy and decompressed block).
+    spare: u64,
+}
+
+impl Budget<'_> {
+    /// The longest prefix of `blocks` (at most [`BATCH`]) whose compressed copies and
+    /// decompressed blocks fit in the spare budget; an error when not even the first does.
+    /// The `exr` crate allocates a decompressed block in full before reading its data, so
+    /// this check is what keeps a hostile block size from aborting the process.
+    fn batch<'b, 'c>(&self, blocks: &'b [PendingBlock<'c>]) -> Result<&'b [PendingBlock<'c>]> {
+        let cost = |b: &PendingBlock<'_>| b.expected_len as u64 + b.data.len() as u64;
+        let mut total = 0u64;
+        let mut count = 0usize;
+        for b in blocks.iter().take(BATCH) {
+            if total + cost(b) > self.spare {
+                break;
+            }
+            total += cost(b);
+            count += 1;
+        }
+        if count == 0 {
+            let first = &blocks[0];
+            self.limits.check_memory(
+                &format!(
+                    "the decoded planes and one decompressed block of {}x{} pixels",
+                    first.rect.size.0, first.rect.size.1
+                ),
+                Some(cost(first) + (self.limits.max_memory_bytes - self.spare)),
+            )?;
+        }
+        Ok(&blocks[..count.max(1)])
+    }
+}
+
+/// Map `f` over `items`, in parallel with the `rayon` feature.
 fn map_items<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync + Send) -> Vec<R> {
     #[cfg(feature = "rayon")]
     {
@@ -546,6 +630,7 @@ fn decompress_and_scatter(
     header: &Header,
     layout: &Layout,
     pending: &[PendingBlock<'_>],
+    budget: &Budget<'_>,
 ) -> Result<Vec<Vec<f32>>> {
     let used = layout.channels();
     let (w, h) = (header.layer_size.0, header.layer_size.1);
@@ -590,17 +675,22 @@ fn decompress_and_scatter(
     };
 
     let mut planes: Vec<Vec<f32>> = Vec::new();
-    for batch in pending.chunks(BATCH) {
+    let mut rest = pending;
+    while !rest.is_empty() {
+        let batch = budget.batch(rest)?;
+        rest = &rest[batch.len()..];
         let decoded = map_items(batch, |block| -> Result<Vec<u8>> {
-            let data = header
-                .compression
-                .decompress_image_section_from_le(
-                    header_for(block),
-                    block.data.to_vec(),
-                    block.rect,
-                    false,
-                )
-                .map_err(exr_error)?;
+            let data = foreign(|| {
+                header
+                    .compression
+                    .decompress_image_section_from_le(
+                        header_for(block),
+                        block.data.to_vec(),
+                        block.rect,
+                        false,
+                    )
+                    .map_err(exr_error)
+            })?;
             if data.len() != block.expected_len {
                 return Err(invalid("decompressed block has the wrong size"));
             }
@@ -696,6 +786,24 @@ fn file_matrix(header: &Header) -> Result<Mat3> {
         .ok_or_else(|| invalid("degenerate chromaticities attribute"))
 }
 
+/// The scene white of a part: its `adoptedNeutral` ("pixels whose (x, y) match the
+/// adoptedNeutral value should be mapped to neutral values on the display", OpenEXR
+/// `ImfStandardAttributes.h`), else the white of its `chromaticities` (D65 when absent), and
+/// for the paper's X/Y/Z layout, to which `chromaticities` does not apply, the paper's
+/// equal-energy illuminant (Sec. 5). `None` if the value found is not a usable white.
+fn adopted_white(header: &Header, layout: &Layout) -> Option<colour::Xy> {
+    let xy = |v: Vec2<f32>| [f64::from(v.0), f64::from(v.1)];
+    let white = match (header.own_attributes.adopted_neutral, layout) {
+        (Some(n), _) => xy(n),
+        (None, Layout::Xyz { .. }) => colour::EQUAL_ENERGY,
+        (None, _) => header
+            .shared_attributes
+            .chromaticities
+            .map_or(REC709.white, |c| xy(c.white)),
+    };
+    colour::is_valid_white(white).then_some(white)
+}
+
 /// `v` as `f32`, saturating finite values at ±`f32::MAX` (Inf and NaN pass through).
 #[inline]
 fn saturate(v: f64) -> f32 {
@@ -783,6 +891,7 @@ fn to_hdr(
         scotopic: None,
         view: None,
         absolute_units: white_luminance.is_some(),
+        adopted_white: adopted_white(header, layout),
     };
     match *layout {
         Layout::Xyz { scotopic, .. } => {
@@ -825,7 +934,7 @@ fn to_hdr(
                     .unwrap_or_else(|| vec![0.0; n])
             };
             let (mut pr, mut pg, mut pb) = (take(r), take(g), take(b));
-            rgb_planes_to_xyz(&m, scale, &mut pr, &mut pg, &mut pb);
+            colour::rgb_planes_to_xyz(&m, scale, &mut pr, &mut pg, &mut pb);
             (image.x, image.y, image.z) = (pr, pg, pb);
         }
         Layout::Yca { ry, by, .. } => {
@@ -857,7 +966,7 @@ fn to_hdr(
                 // Reuse the planes: r ← R, l ← G, b ← B.
                 (*r, *l, *b) = (red as f32, green as f32, blue as f32);
             }
-            rgb_planes_to_xyz(&m, scale, &mut cr, &mut lum, &mut cb);
+            colour::rgb_planes_to_xyz(&m, scale, &mut cr, &mut lum, &mut cb);
             (image.x, image.y, image.z) = (cr, lum, cb);
         }
     }
@@ -865,17 +974,6 @@ fn to_hdr(
         .check_consistent()
         .map_err(|_| invalid("inconsistent planes"))?;
     Ok(image)
-}
-
-/// In place: (R, G, B) planes → (X, Y, Z) planes, times `scale`.
-fn rgb_planes_to_xyz(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
-    let m: Vec<f64> = m.iter().flatten().map(|v| v * scale).collect();
-    for ((pr, pg), pb) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
-        let (cr, cg, cb) = (f64::from(*pr), f64::from(*pg), f64::from(*pb));
-        *pr = saturate(m[0] * cr + m[1] * cg + m[2] * cb);
-        *pg = saturate(m[3] * cr + m[4] * cg + m[5] * cb);
-        *pb = saturate(m[6] * cr + m[7] * cg + m[8] * cb);
-    }
 }
 
 // ------------------------------------------------------------------------------------------
@@ -900,6 +998,7 @@ fn write_layer(
     channels: Vec<(&'static str, Vec<f32>)>,
     white_luminance: Option<f32>,
     chromaticities: Option<exr::meta::attribute::Chromaticities>,
+    adopted_neutral: Option<colour::Xy>,
     w: impl std::io::Write + std::io::Seek,
 ) -> Result<()> {
     use exr::prelude::*;
@@ -909,6 +1008,7 @@ fn write_layer(
         .collect();
     let attributes = LayerAttributes {
         white_luminance,
+        adopted_neutral: adopted_neutral.map(|[x, y]| Vec2(x as f32, y as f32)),
         ..LayerAttributes::default()
     };
     let encoding = Encoding {
@@ -966,13 +1066,15 @@ pub fn write_display(image: &DisplayImage, w: impl std::io::Write + std::io::See
         ],
         Some(l),
         Some(rec709_attribute()),
+        None,
         w,
     )
 }
 
 /// Write an HDR image in the paper's own layout: channels `X`, `Y`, `Z` (+ `scotopic` when
-/// present) as 32-bit floats in cd/m² (scotopic cd/m²), RLE. [`decode`] reads it back as an
-/// absolute image.
+/// present) as 32-bit floats in cd/m² (scotopic cd/m²), RLE, with the image's adopted white
+/// as `adoptedNeutral` when it has one other than E (the layout's own white). [`decode`] reads it back as an absolute image with
+/// the same adopted white.
 pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Result<()> {
     let mut planes = vec![&image.x, &image.y, &image.z];
     if let Some(s) = &image.scotopic {
@@ -987,7 +1089,16 @@ pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Re
     if let Some(s) = &image.scotopic {
         channels.push(("scotopic", s.clone()));
     }
-    write_layer(image.width, image.height, channels, None, None, w)
+    write_layer(
+        image.width,
+        image.height,
+        channels,
+        None,
+        None,
+        // E is what the layout means without the attribute.
+        image.adopted_white.filter(|w| *w != colour::EQUAL_ENERGY),
+        w,
+    )
 }
 
 /// Write one luminance plane in cd/m² (e.g. a [`visibility`](crate::visibility) tolerance
@@ -1001,7 +1112,7 @@ pub fn write_luminance(
 ) -> Result<()> {
     let plane = y.to_vec();
     check_planes(width, height, &[&plane])?;
-    write_layer(width, height, vec![("Y", plane)], Some(1.0), None, w)
+    write_layer(width, height, vec![("Y", plane)], Some(1.0), None, None, w)
 }
 
 /// Write one plane of numbers that are not luminances (e.g. a
@@ -1015,7 +1126,7 @@ pub fn write_plane(
 ) -> Result<()> {
     let plane = values.to_vec();
     check_planes(width, height, &[&plane])?;
-    write_layer(width, height, vec![("Y", plane)], None, None, w)
+    write_layer(width, height, vec![("Y", plane)], None, None, None, w)
 }
 
 #[cfg(test)]

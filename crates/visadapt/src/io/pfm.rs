@@ -14,7 +14,8 @@
 //!   writer declared);
 //! * RGB is taken as linear Rec. 709 / sRGB primaries with D65 white and converted to CIE
 //!   XYZ with [`REC709`]'s matrix; grey is luminance Y, with X and Z set so the colour is
-//!   D65 white (X = 0.9505·Y, Z = 1.0891·Y, the row sums of that matrix);
+//!   D65 white (X = 0.9505·Y, Z = 1.0891·Y, the row sums of that matrix); the adopted
+//!   white ([`HdrImage::adopted_white`]) is D65;
 //! * PFM carries no units, so the image is relative ([`HdrImage::absolute_units`] false);
 //! * sizes are overflow-checked and checked against [`Limits`] before allocation; fewer
 //!   data bytes than the header declares is a decode error, extra bytes are ignored.
@@ -136,6 +137,7 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
 
     let m = REC709.rgb_to_xyz().expect("Rec.709 primaries are valid");
     let mut image = HdrImage::zeros(w, h);
+    image.adopted_white = Some(REC709.white);
     for file_row in 0..h {
         let y = h - 1 - file_row; // bottom row first in the file
         for x in 0..w {

@@ -23,14 +23,16 @@
 //! Units (Radiance convention, `color.h` `WHTEFFICACY` = 179 lm/W): after dividing by the
 //! exposure and colour correction, an RGBE value is radiometric and its luminance in
 //! cd/m² is 179 × Y of the RGB→XYZ matrix of the file's primaries; an XYZE value is
-//! already photometric, CIE XYZ with Y in cd/m². (`pcond.c` computes luminance as
+//! already photometric, CIE XYZ with Y in cd/m². The adopted white
+//! ([`HdrImage::adopted_white`]) is the white of the `PRIMARIES=`, equal energy by default
+//! (`color.h` `CIE_x_w` = `CIE_y_w` = 1/3), for RGBE and XYZE alike. (`pcond.c` computes luminance as
 //! `179·Y(rgb)/exposure` for RGBE but `Y/exposure` for XYZE, and `ra_xyze.c` converts
 //! RGBE to XYZE by writing the unscaled values with `EXPOSURE=1/179`.)
 //!
 //! The reader never panics on bad input and never allocates more than the size checked
 //! against [`Limits`]: every inconsistency or truncation is an [`Error::Decode`].
 
-use crate::colour::{Chromaticities, Mat3, RADIANCE_DEFAULT};
+use crate::colour::{self, Chromaticities, Mat3, RADIANCE_DEFAULT, Xy};
 use crate::{Error, HdrImage, Limits, Projection, Result, View};
 
 /// The format name used in errors and in [`Limits::check`].
@@ -112,6 +114,7 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
         scotopic: None,
         view: None,
         absolute_units: true,
+        adopted_white: None,
     };
     decode_into(bytes, limits, &mut image)?;
     Ok(image)
@@ -120,7 +123,8 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
 /// [`decode`] into an existing image, reusing its planes' memory when they are large
 /// enough (for decoding a sequence of frames without allocating and page-faulting fresh
 /// planes each time). On success `image` is entirely overwritten (size, planes, `view`,
-/// `scotopic = None`, `absolute_units = true`); on error its contents are unspecified.
+/// `scotopic = None`, `absolute_units = true`, `adopted_white` = the white of the
+/// `PRIMARIES=`, E by default); on error its contents are unspecified.
 pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Result<()> {
     let (header, after_header) = parse_header(bytes)?;
     let (res, data_start) = parse_resolution(bytes, after_header)?;
@@ -153,6 +157,7 @@ pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Resul
     image.scotopic = None;
     image.view = header.view;
     image.absolute_units = true;
+    image.adopted_white = colour::is_valid_white(header.white).then_some(header.white);
     let (x, y, z) = (&mut image.x, &mut image.y, &mut image.z);
 
     // Every output sample is written exactly once: scanline s, position i maps
@@ -256,6 +261,8 @@ struct Header {
     colorcorr: [f64; 3],
     /// RGB→XYZ matrix of the `PRIMARIES=` (or default) chromaticities, white Y = 1.
     rgb_to_xyz: Mat3,
+    /// The white of the `PRIMARIES=` (E by default), for RGBE and XYZE alike.
+    white: Xy,
     view: Option<View>,
 }
 
@@ -350,6 +357,7 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, usize)> {
         exposure,
         colorcorr,
         rgb_to_xyz,
+        white: primaries.white,
         view,
     };
     Ok((header, pos))

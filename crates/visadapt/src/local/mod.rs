@@ -169,6 +169,10 @@ pub struct LocalMapping {
     display_max_cd_m2: f64,
     /// Limit the rod signal (see the module docs).
     rod_saturation: bool,
+    /// Largest input channel value (cd/m²) whose mapped value stays within
+    /// [`operator::MAX_DISPLAY_RELATIVE`] at any table entry: brighter pixels are scaled
+    /// down to it first, as in the global operator (counted as saturated).
+    max_input: f32,
 }
 
 impl LocalMapping {
@@ -190,6 +194,7 @@ impl LocalMapping {
         let (lp, hp) = range(&map.offset_log);
         let (ls, hs) = range(&map.offset_scotopic_log);
         let display_max_cd_m2 = global.display_max_cd_m2;
+        let bound = f64::from(operator::MAX_DISPLAY_RELATIVE);
         let (lwa, lwa_s) = (
             map.world_adaptation_cd_m2,
             map.world_adaptation_scotopic_cd_m2,
@@ -202,7 +207,7 @@ impl LocalMapping {
             for (r, row) in rows.iter().enumerate() {
                 out[3 * r..3 * r + 3].copy_from_slice(row);
             }
-            out[9] = (b / display_max_cd_m2) as f32;
+            out[9] = (b / display_max_cd_m2).clamp(-bound, bound) as f32;
             out
         });
         let rod = Table::new(ls, hs, |d| {
@@ -210,15 +215,27 @@ impl LocalMapping {
             let (m, b) = rod(l);
             let k = rod_weight(l);
             [
-                (k * m / display_max_cd_m2) as f32,
-                (k * b / display_max_cd_m2) as f32,
+                (k * m / display_max_cd_m2).clamp(-bound, bound) as f32,
+                (k * b / display_max_cd_m2).clamp(-bound, bound) as f32,
             ]
         });
+        // The largest gain from a channel to an output over all table entries (as the
+        // global operator's: a cone row's absolute sum plus four times the rod coefficient).
+        let cone_gain = cone.values.iter().fold(0f64, |g, v| {
+            (0..3).fold(g, |g, r| {
+                g.max(v[3 * r..3 * r + 3].iter().map(|c| f64::from(c.abs())).sum())
+            })
+        });
+        let rod_gain = rod
+            .values
+            .iter()
+            .fold(0f64, |g, v| g.max(f64::from(v[0].abs())));
         LocalMapping {
             cone,
             rod,
             display_max_cd_m2,
             rod_saturation,
+            max_input: operator::max_input_for_gain(cone_gain + 4.0 * rod_gain),
         }
     }
 
@@ -323,7 +340,7 @@ fn map_chunk(
     b: &mut [f32],
 ) -> PixelStats {
     let end = start + r.len();
-    let (mut non_finite, mut negative) = (0usize, 0usize);
+    let (mut non_finite, mut negative, mut saturated) = (0usize, 0usize, 0usize);
     let saturation = if mapping.rod_saturation {
         ROD_SATURATION_SCOTOPIC_CD_M2
     } else {
@@ -335,10 +352,11 @@ fn map_chunk(
     );
     for (j, i) in (start..end).enumerate() {
         let s = image.scotopic.as_ref().map_or(0.0, |s| s[i]);
-        let (finite, neg, [x, y, z, s]) =
-            operator::sanitize([image.x[i], image.y[i], image.z[i], s]);
+        let (finite, neg, v) = operator::sanitize([image.x[i], image.y[i], image.z[i], s]);
+        let (sat, [x, y, z, s]) = operator::saturate(v, mapping.max_input);
         non_finite += usize::from(!finite);
         negative += usize::from(neg);
+        saturated += usize::from(sat);
         let v = match &image.scotopic {
             Some(_) => s,
             None => scotopic::from_xyz(x, y, z),
@@ -355,6 +373,7 @@ fn map_chunk(
         non_finite,
         negative,
         clipped: 0,
+        saturated,
     }
 }
 

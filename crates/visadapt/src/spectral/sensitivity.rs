@@ -78,13 +78,7 @@ pub fn spectral_sensitivity(
     adaptation_cd_m2: f64,
     wavelength_nm: f64,
 ) -> Result<SpectralSensitivity> {
-    if !(adaptation_cd_m2.is_finite() && adaptation_cd_m2 > 0.0) {
-        return Err(Error::invalid(
-            "adaptation",
-            adaptation_cd_m2,
-            "must be a positive, finite luminance",
-        ));
-    }
+    crate::check_luminance("adaptation", adaptation_cd_m2)?;
     let range = || Error::invalid("wavelength", wavelength_nm, "must be in 380..=780 nm");
     let v = interpolate(&tables::CIE1931_Y_BAR, wavelength_nm).ok_or_else(range)?;
     let v_prime = interpolate(&tables::CIE1951_V_PRIME, wavelength_nm).ok_or_else(range)?;

@@ -37,7 +37,22 @@ const DEFAULT_CHANGE: f64 = 0.1;
 
 pub type Shared = Arc<Mutex<Viewer>>;
 
-pub fn router(viewer: Shared) -> Router {
+/// The routes. With `loopback_only` (the server listens on a loopback address), a request
+/// whose `Host` is not a loopback name or address is refused (403): a web page elsewhere
+/// cannot reach the viewer through a name that resolves to 127.0.0.1 (DNS rebinding).
+pub fn router(viewer: Shared, loopback_only: bool) -> Router {
+    let host_check = axum::middleware::from_fn(
+        move |request: axum::extract::Request, next: axum::middleware::Next| async move {
+            if loopback_only && !loopback_host(request.headers().get(header::HOST)) {
+                return (
+                    StatusCode::FORBIDDEN,
+                    "the viewer answers loopback names only\n",
+                )
+                    .into_response();
+            }
+            next.run(request).await
+        },
+    );
     Router::new()
         .route(
             "/",
@@ -55,7 +70,23 @@ pub fn router(viewer: Shared) -> Router {
         .route("/api/report", get(report))
         .route("/api/pixel", get(pixel))
         .fallback(|| async { (StatusCode::NOT_FOUND, "not found\n") })
+        .layer(host_check)
         .with_state(viewer)
+}
+
+/// `Host` names this machine's loopback: `localhost`, `127.x.x.x` or `[::1]`, any port.
+fn loopback_host(host: Option<&header::HeaderValue>) -> bool {
+    let Some(host) = host.and_then(|h| h.to_str().ok()) else {
+        return false;
+    };
+    let name = match host.strip_prefix('[') {
+        Some(v6) => v6.split(']').next().unwrap_or(""),
+        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
+    };
+    name.eq_ignore_ascii_case("localhost")
+        || name
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
 }
 
 fn page(body: &'static str, content_type: &'static str) -> Response {

@@ -12,9 +12,17 @@ use std::sync::{Arc, Mutex};
 use visadapt::io;
 
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
-    let conditions = args
-        .viewing
-        .conditions(Some(&args.display), None, Some(&args.view));
+    if args.viewing.glare.glare {
+        anyhow::bail!(
+            "--glare: the viewer does not show veiling glare yet (use map, sequence or video)"
+        );
+    }
+    let conditions = args.viewing.conditions(
+        Some(&args.display),
+        None,
+        Some(&args.view),
+        Some(&args.colour),
+    );
     conditions.validate()?;
 
     let mut image = io::read(&args.input, &args.limits.limits())
@@ -32,7 +40,6 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         acuity: conditions.acuity,
     };
     let viewer = viewer::Viewer::new(args.input.clone(), image, scale, conditions, defaults);
-    let app = api::router(Arc::new(Mutex::new(viewer)));
 
     // Two workers are plenty for one user's page; the model's own parallelism is rayon's.
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -45,6 +52,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
             .await
             .with_context(|| format!("cannot listen on {}:{}", args.host, args.port))?;
         let address = listener.local_addr()?;
+        let app = api::router(Arc::new(Mutex::new(viewer)), address.ip().is_loopback());
         if !address.ip().is_loopback() {
             log::warn!("listening on {address}: other machines can reach the viewer and the image");
         }
