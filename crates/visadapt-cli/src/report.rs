@@ -65,7 +65,7 @@ pub fn glare_text(r: &Report) -> String {
         v.veil_at_centre_scotopic_cd_m2,
         v.mean_veil_cd_m2,
         g.world_adaptation_without_glare_cd_m2,
-        g.adaptation_raise(r),
+        g.adaptation_ratio(r),
     )
 }
 

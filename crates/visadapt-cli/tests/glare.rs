@@ -55,7 +55,7 @@ fn map_glare_reports_the_veil_and_the_raised_adaptation() {
     assert_eq!(plain["adaptation_cd_m2"].as_f64().unwrap(), without);
     // With it the veil lifts the whole field: adaptation and thresholds rise.
     let with = glared["adaptation_cd_m2"].as_f64().unwrap();
-    let raise = g["adaptation_raise"].as_f64().unwrap();
+    let raise = g["adaptation_ratio"].as_f64().unwrap();
     assert!(
         (raise - with / without).abs() < 1e-9 && raise > 1.5,
         "{raise}"

@@ -287,9 +287,11 @@ pub struct GlareEffect {
 }
 
 impl GlareEffect {
-    /// How many times the glare raised the cone adaptation level (1 when the adaptation
-    /// was given by the caller).
-    pub fn adaptation_raise(&self, report: &Report) -> f64 {
+    /// The cone adaptation level with glare over the level without it (1 when the
+    /// adaptation was given by the caller). Above 1 when the veil lifts a dark scene;
+    /// below 1 when the few brightest pixels that set Sec. 4.4's "half the highest visible
+    /// luminance" lose part of their light to their own halo (`GoldenGate.exr`: 0.861).
+    pub fn adaptation_ratio(&self, report: &Report) -> f64 {
         report.world_adaptation_cd_m2 / self.world_adaptation_without_glare_cd_m2
     }
 }
@@ -431,7 +433,7 @@ pub fn local_map(
 /// let effect = report.glare.as_ref().unwrap();
 /// // The veil lifts the dark field near the light and raises the adaptation level.
 /// assert!(retina.y[90 * w + 180] > 10.0 * scene.y[90 * w + 180]);
-/// assert!(effect.adaptation_raise(&report) > 1.5);
+/// assert!(effect.adaptation_ratio(&report) > 1.5);
 /// # Ok::<(), visadapt::Error>(())
 /// ```
 pub fn prepare<'a>(

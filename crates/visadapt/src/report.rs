@@ -140,7 +140,7 @@ pub fn local_json(l: &LocalReport) -> Value {
 /// let v = report::map_json(&out.report, &out.stats, 1.0);
 /// assert_eq!(v["glare"]["age_years"], 25.0);
 /// assert!(v["glare"]["veil_at_fixation_cd_m2"].as_f64().unwrap() > 0.0);
-/// assert!(v["glare"]["adaptation_raise"].as_f64().unwrap() > 1.0);
+/// assert!(v["glare"]["adaptation_ratio"].as_f64().unwrap() > 1.0);
 /// # Ok::<(), visadapt::Error>(())
 /// ```
 pub fn glare_json(r: &Report) -> Value {
@@ -155,7 +155,7 @@ pub fn glare_json(r: &Report) -> Value {
         "mean_veil_cd_m2": g.veil.mean_veil_cd_m2,
         "adaptation_without_glare_cd_m2": g.world_adaptation_without_glare_cd_m2,
         "scotopic_adaptation_without_glare_cd_m2": g.world_adaptation_without_glare_scotopic_cd_m2,
-        "adaptation_raise": g.adaptation_raise(r),
+        "adaptation_ratio": g.adaptation_ratio(r),
         "scattered_fraction": g.veil.scattered_fraction,
         "cell_deg": g.veil.cell_deg,
         "near_radius_deg": g.veil.near_radius_deg,

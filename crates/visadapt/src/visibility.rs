@@ -559,6 +559,13 @@ pub fn converged(previous: &HdrImage, current: &HdrImage, viewer: &Viewer) -> Re
 /// own colour, that stays invisible to `viewer` whatever its spatial extent (see the module
 /// docs). The acuity Gaussian only makes fine-grained errors less visible still, so it is not
 /// used here.
+///
+/// With glare (a viewer from [`Observation::for_image`] under
+/// [`ViewingConditions::glare`](operator::ViewingConditions::glare)) the thresholds are
+/// those of the veiled retinal image, and the error itself is taken unveiled: the glare
+/// spread function conserves energy, so an error spread over a region reaches the retina
+/// almost whole (only a point-like error loses the scattered fraction to its halo), and a
+/// tolerance that must hold for errors of any extent is set by the extended case.
 pub fn tolerance_map(image: &HdrImage, viewer: &Viewer) -> Result<Vec<f32>> {
     image.check_consistent()?;
     let n = image.len();

@@ -426,7 +426,7 @@ fn the_veil_raises_adaptation_and_thresholds() {
     // The veil (~0.6 cd/m² there, 30 times the street) raises the adaptation level,
     // and with it the cone threshold (Eq. 4) and the rod adaptation.
     assert!(got > 10.0 * 0.02, "{got}");
-    let raise = effect.adaptation_raise(&glared.report);
+    let raise = effect.adaptation_ratio(&glared.report);
     assert!(raise > 2.0, "{raise}");
     assert!(glared.report.cone_threshold_cd_m2 > plain.report.cone_threshold_cd_m2);
     assert!(
@@ -464,7 +464,7 @@ fn without_glare_the_operator_is_the_papers_and_a_sourceless_scene_barely_change
         .glare
         .as_ref()
         .unwrap()
-        .adaptation_raise(&out.report);
+        .adaptation_ratio(&out.report);
     assert!(
         raise <= 1.0 && raise >= 1.0 - lost,
         "{raise} vs lost {lost}"

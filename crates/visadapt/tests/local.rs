@@ -409,3 +409,66 @@ fn visibility_uses_the_same_local_map() {
         }
     }
 }
+
+/// A dark field of 0.01 cd/m² with one headlight of 2e6 cd/m² (the default view).
+fn headlight() -> (HdrImage, usize) {
+    let (w, h) = (320, 180);
+    let mut img = HdrImage::zeros(w, h);
+    for i in 0..w * h {
+        grey(&mut img, i, 0.01);
+    }
+    let light = 90 * w + 200;
+    grey(&mut img, light, 2e6);
+    (img, light)
+}
+
+#[test]
+fn glare_feeds_the_adaptation_map() {
+    use visadapt::glare::Glare;
+    use visadapt::operator::{local_map, prepare};
+    let (img, light) = headlight();
+    let options = LocalAdaptation::default();
+    let without = local(options.radius_deg);
+    let with = ViewingConditions {
+        glare: Some(Glare::default()),
+        ..without.clone()
+    };
+    let level = |c: &ViewingConditions, i: usize| {
+        let (retina, report) = prepare(&img, c).unwrap();
+        local_map(&retina, &report, c, &options)
+            .unwrap()
+            .adaptation_cd_m2(i)
+    };
+    // 20 px (about 3°) left of the light, and a far corner.
+    let near = light - 20;
+    let (a0, a1) = (level(&without, near), level(&with, near));
+    let (c0, c1) = (level(&without, 0), level(&with, 0));
+    println!("local adaptation near the light {a0:.4e} -> {a1:.4e}, corner {c0:.4e} -> {c1:.4e}");
+    // Near the light the veil (tens of times the 0.01 cd/m² field, see the glare tests)
+    // raises the local adaptation by far more than far from it.
+    assert!(a1 > 3.0 * a0, "{a0} -> {a1}");
+    assert!(
+        a1 / a0 > 2.0 * (c1 / c0),
+        "near ×{} corner ×{}",
+        a1 / a0,
+        c1 / c0
+    );
+    // And the map's report says so through map().
+    let out = run(&img, &with);
+    assert!(out.report.glare.is_some() && out.report.local.is_some());
+}
+
+#[test]
+fn huge_finite_pixels_stay_finite() {
+    // One pixel of 1e37 cd/m² in a dark scene: the global operator scales it down before
+    // the mapping (issue 9 §4); the local tables are bounded the same way.
+    let (mut img, light) = headlight();
+    grey(&mut img, light, 1e37);
+    let out = run(&img, &local(1.0));
+    for p in [&out.image.r, &out.image.g, &out.image.b] {
+        assert!(p.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
+    }
+    assert_eq!(out.stats.saturated, 1);
+    // The rest of the image is not black.
+    assert!(display_cd_m2(&out.image, 0) > 0.01);
+}

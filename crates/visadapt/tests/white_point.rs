@@ -268,3 +268,24 @@ fn luminance_and_every_threshold_are_unchanged() {
     println!("ColorChecker under E: largest change of Y by CAT16 E -> D65 {worst:.4}");
     assert!(worst < 0.01, "{worst}");
 }
+
+#[test]
+fn grey_rgbe_file_is_neutral_with_local_adaptation() {
+    // The per-pixel tables of local adaptation are built from the same chromatically
+    // adapted cone matrix as the global operator.
+    use visadapt::local::LocalAdaptation;
+    use visadapt::operator::AdaptationMode;
+    let img = radiance::decode(&grey_rgbe(64, 4, ""), &Limits::default()).unwrap();
+    let local = |white_point| ViewingConditions {
+        adaptation: AdaptationMode::Local(LocalAdaptation::default()),
+        ..conditions(white_point)
+    };
+    let out = map(&img, &local(WhitePoint::Auto)).unwrap();
+    let (c, n) = max_chroma(&out.image);
+    println!("grey RGBE, local adaptation: max C* {c:.3} over {n} pixels");
+    assert!(n > 100, "{n} unclipped pixels");
+    assert!(c < 1.5, "C* {c}");
+    let paper = map(&img, &local(WhitePoint::Off)).unwrap();
+    let (c0, _) = max_chroma(&paper.image);
+    assert!(c0 > 5.0, "C* {c0}");
+}
