@@ -58,7 +58,9 @@
 //! [`write_display`] writes a [`DisplayImage`] as 32-bit float R, G, B (RLE) with
 //! `chromaticities` = Rec. 709 and `whiteLuminance` = the display maximum, so RGB (1, 1, 1)
 //! reads back as `L_dmax` cd/m². [`write_hdr`] writes an [`HdrImage`] in the paper's layout:
-//! 32-bit float `X`, `Y`, `Z` (+ `scotopic`) in cd/m² (RLE).
+//! 32-bit float `X`, `Y`, `Z` (+ `scotopic`) in cd/m² (RLE). Blocks are chosen by bytes
+//! ([`BlockLayout`]): scan lines for ordinary images, tiles for very narrow or very wide
+//! ones, so that no shape makes a file of millions of tiny chunks or one huge one.
 
 use crate::colour::{self, Chromaticities, Mat3, REC709};
 use crate::{DisplayImage, Error, HdrImage, Limits, Result};
@@ -991,7 +993,69 @@ fn rec709_attribute() -> exr::meta::attribute::Chromaticities {
     }
 }
 
-/// Write one layer of f32 channels `(name, samples)`, RLE, scan lines.
+/// Bytes of uncompressed pixel data the writers aim to put in one block (chunk). Our
+/// choice: large enough that the per-chunk cost (a header, an offset-table entry and one
+/// compression call each) is negligible, small enough that blocks compress in parallel and
+/// a reader holds little per block. The OpenEXR library's default 64 × 64 tiles of four
+/// half channels are 32 KiB.
+pub const BLOCK_BYTES: usize = 64 << 10;
+
+/// Scan lines of fewer bytes than this are grouped into tiles instead (RLE stores one
+/// scan line per chunk, OpenEXR file layout, "Scan line-based images": a 1-pixel-wide
+/// image would take one chunk per pixel). Our choice.
+pub const MIN_LINE_BYTES: usize = 4 << 10;
+
+/// How a written image is divided into blocks: ordinary images (a scan line of
+/// [`MIN_LINE_BYTES`] to 16 × [`BLOCK_BYTES`]) in scan lines, one per chunk as RLE
+/// stores them; narrower or much wider ones in tiles of at most [`BLOCK_BYTES`] (the full
+/// width, or as many pixels of a row as fit, by as many rows as fit). Chosen by bytes, not
+/// lines, so the chunk count stays about `width × height × bytes_per_pixel /
+/// BLOCK_BYTES` whatever the shape: a 1 × 4194304 RGB image is 769 chunks, not 4194304.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlockLayout {
+    /// One scan line per chunk.
+    ScanLines,
+    /// Tiles of `width × height` pixels (edge tiles are cut to the image).
+    Tiles {
+        /// Tile width in pixels.
+        width: usize,
+        /// Tile height in pixels.
+        height: usize,
+    },
+}
+
+impl BlockLayout {
+    /// The layout for a `width × height` image of `bytes_per_pixel` bytes per pixel.
+    pub fn for_image(width: usize, height: usize, bytes_per_pixel: usize) -> Self {
+        let bpp = bytes_per_pixel.max(1);
+        let line = width.saturating_mul(bpp);
+        // Small images keep scan lines: they have few chunks whatever the layout.
+        let small = line.saturating_mul(height) <= BLOCK_BYTES;
+        if small || (MIN_LINE_BYTES..=16 * BLOCK_BYTES).contains(&line) {
+            return BlockLayout::ScanLines;
+        }
+        let tile_width = width.clamp(1, (BLOCK_BYTES / bpp).max(1));
+        let tile_height = height.clamp(1, (BLOCK_BYTES / (tile_width * bpp)).max(1));
+        BlockLayout::Tiles {
+            width: tile_width,
+            height: tile_height,
+        }
+    }
+
+    /// The number of chunks a `width × height` image takes in this layout (RLE).
+    pub fn chunk_count(self, width: usize, height: usize) -> usize {
+        match self {
+            BlockLayout::ScanLines => height,
+            BlockLayout::Tiles {
+                width: tw,
+                height: th,
+            } => width.div_ceil(tw) * height.div_ceil(th),
+        }
+    }
+}
+
+/// Write one layer of f32 channels `(name, samples)`, RLE, in blocks chosen by
+/// [`BlockLayout::for_image`].
 fn write_layer(
     width: usize,
     height: usize,
@@ -1011,9 +1075,16 @@ fn write_layer(
         adopted_neutral: adopted_neutral.map(|[x, y]| Vec2(x as f32, y as f32)),
         ..LayerAttributes::default()
     };
+    let blocks = match BlockLayout::for_image(width, height, 4 * list.len()) {
+        BlockLayout::ScanLines => Blocks::ScanLines,
+        BlockLayout::Tiles {
+            width: tw,
+            height: th,
+        } => Blocks::Tiles(Vec2(tw, th)),
+    };
     let encoding = Encoding {
         compression: Compression::RLE,
-        blocks: Blocks::ScanLines,
+        blocks,
         line_order: LineOrder::Increasing,
     };
     let layer = Layer::new(
