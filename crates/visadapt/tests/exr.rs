@@ -952,3 +952,38 @@ fn narrow_and_wide_images_are_written_in_blocks_sized_by_bytes() {
         );
     }
 }
+
+#[test]
+fn the_view_is_written_and_read_back() {
+    use visadapt::{Projection, View};
+    for view in [
+        View::perspective(37.5, 40, 30),
+        View::angular_fisheye(220.0, 40, 30),
+    ] {
+        let mut image = HdrImage::zeros(40, 30);
+        image.y.fill(1.0);
+        image.view = Some(view);
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        visadapt::io::exr::write_hdr(&image, &mut bytes).unwrap();
+        let back = visadapt::io::decode(bytes.get_ref(), &visadapt::Limits::default()).unwrap();
+        let v = back.view.expect("the view is read back");
+        assert_eq!(v.projection, view.projection);
+        assert!((v.horizontal_deg - view.horizontal_deg).abs() < 1e-12);
+        assert!((v.vertical_deg - view.vertical_deg).abs() < 1e-12);
+    }
+    assert_eq!(
+        visadapt::io::radiance::view_options(&View {
+            projection: Projection::Perspective,
+            horizontal_deg: 60.0,
+            vertical_deg: 35.5
+        }),
+        "-vtv -vh 60 -vv 35.5"
+    );
+    // Without a view, none is invented.
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    let mut image = HdrImage::zeros(4, 4);
+    image.y.fill(1.0);
+    visadapt::io::exr::write_hdr(&image, &mut bytes).unwrap();
+    let back = visadapt::io::decode(bytes.get_ref(), &visadapt::Limits::default()).unwrap();
+    assert_eq!(back.view, None);
+}

@@ -53,6 +53,7 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
         view: args.view.view(reference.width, reference.height),
         ..conditions
     };
+    super::warn_if_default_view(&args.reference, &reference, &conditions);
     let (viewer, report) = Viewer::for_image(&reference, &conditions)?;
     // With --glare the two images are compared as they reach the retina, each with its
     // own veil (the observer adapted to the reference's, above).
