@@ -383,8 +383,8 @@ fn numbers<const N: usize>(key: &str, v: &[u8]) -> Result<[f64; N]> {
     Ok(out)
 }
 
-/// A view as Radiance view options, e.g. `-vtv -vh 60 -vv 35.98` (`-vt?` type letter as in
-/// [`parse_view`]), the text of a `VIEW=` line and of the OpenEXR
+/// A view as Radiance view options, e.g. `-vtv -vh 60 -vv 35.98` (Radiance's `-vt?` type
+/// letters), the text of a `VIEW=` line and of the OpenEXR
 /// [`VIEW_ATTRIBUTE`](super::exr::VIEW_ATTRIBUTE).
 pub fn view_options(view: &View) -> String {
     let t = match view.projection {
