@@ -515,8 +515,8 @@ Examples:
   visadapt chart -o chart.exr --white 0.04            # the chart lit at moonlight level
   visadapt chart -o near.exr --white 100 --fov 30     # seen from nearer (scene spans 30 degrees)
 
-The EXR holds X, Y, Z (cd/m²) and scotopic (scotopic cd/m²), the paper's layout. EXR files
-do not record the view: map them with the --fov that `chart` prints.";
+The EXR holds X, Y, Z (cd/m²) and scotopic (scotopic cd/m²), the paper's layout, and the view
+in its visadaptView attribute (Radiance view options), which map and visible read back.";
 
 const DEMO_EXAMPLES: &str = "\
 Examples:

@@ -7,6 +7,7 @@ mod cli;
 mod commands;
 mod graphics;
 mod report;
+mod signals;
 
 use clap::Parser;
 use std::process::ExitCode;
@@ -23,6 +24,15 @@ fn main() -> ExitCode {
     let cli = cli::Cli::parse();
     if let Err(e) = cli.check() {
         e.exit();
+    }
+    // Ctrl-C and SIGTERM remove the outputs in flight and exit 130/143 (`signals`), except
+    // in the viewer, which stops gracefully on them by itself.
+    #[cfg(feature = "serve")]
+    let serving = matches!(cli.command, cli::Command::Serve(_));
+    #[cfg(not(feature = "serve"))]
+    let serving = false;
+    if !serving {
+        signals::remove_outputs_in_flight_on_interrupt();
     }
     let result = match cli.command {
         cli::Command::Map(args) => commands::map::run(args),

@@ -458,7 +458,7 @@ fn video_stops_at_a_frame_of_another_size_and_keeps_what_it_wrote() {
     let out = visadapt()
         .arg("video")
         .arg(dir.path().join("v%d.exr"))
-        .args(["--fps", "30", "-o"])
+        .args(["--fps", "30", "--fov", "60", "-o"])
         .arg(&outdir)
         .output()
         .unwrap();
@@ -479,7 +479,7 @@ fn video_stops_at_a_frame_of_another_size_and_keeps_what_it_wrote() {
     let out = visadapt()
         .arg("video")
         .arg(dir.path().join("v%d.exr"))
-        .args(["--fps", "30", "-o"])
+        .args(["--fps", "30", "--fov", "60", "-o"])
         .arg(&outdir)
         .output()
         .unwrap();

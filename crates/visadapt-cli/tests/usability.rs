@@ -349,3 +349,64 @@ fn plots_take_the_papers_figure_numbers() {
         assert!(out.exists(), "{name}");
     }
 }
+
+#[test]
+fn the_charts_view_travels_in_its_exr_and_a_default_view_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let chart = dir.path().join("chart.exr");
+    visadapt()
+        .args(["chart", "--white", "100", "-o"])
+        .arg(&chart)
+        .assert()
+        .success();
+    // The chart stands at the Snellen distance: 120 pixels per degree (its own report).
+    let out = visadapt()
+        .arg("map")
+        .arg(&chart)
+        .arg("-o")
+        .arg(dir.path().join("c.png"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v = json(&out.stdout);
+    assert!(
+        (v["pixels_per_degree"].as_f64().unwrap() - 120.0).abs() < 1e-6,
+        "{v}"
+    );
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("view"));
+
+    // A file without a view, acuity on: one warning naming the file and the guess.
+    let plain = write(dir.path(), "plain.exr", &grey(32, 16, 10.0));
+    let out = visadapt()
+        .arg("map")
+        .arg(&plain)
+        .arg("-o")
+        .arg(dir.path().join("p.png"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        stderr.matches("does not record its view").count(),
+        1,
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("plain.exr") && stderr.contains("60 degree"),
+        "{stderr}"
+    );
+    // With --fov or without acuity there is nothing to warn about.
+    for extra in [["--fov", "40"], ["--no-acuity", "--json"]] {
+        let out = visadapt()
+            .arg("map")
+            .arg(&plain)
+            .arg("-o")
+            .arg(dir.path().join("q.png"))
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        assert!(!String::from_utf8_lossy(&out.stderr).contains("view"));
+    }
+}

@@ -866,3 +866,124 @@ fn shared_star_field_luminance_chroma() {
     assert!(img.y.iter().all(|&v| v >= 0.0));
     assert!(mean < 0.05 && max > 100.0, "mean {mean}, max {max}");
 }
+
+// ---------------------------------------------------------------------------------------
+// Block layout of written files
+// ---------------------------------------------------------------------------------------
+
+/// The chunk count and block geometry a written file declares, as any reader sees them.
+fn written_blocks(bytes: &[u8]) -> (usize, exr::meta::BlockDescription) {
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).unwrap();
+    let h = &meta.headers[0];
+    (h.chunk_count, h.blocks)
+}
+
+/// A display image of `width × height` with a ramp, to check every pixel comes back.
+fn ramp_display(width: usize, height: usize) -> DisplayImage {
+    let n = width * height;
+    let ramp: Vec<f32> = (0..n).map(|i| i as f32 / n as f32).collect();
+    DisplayImage {
+        width,
+        height,
+        r: ramp.clone(),
+        g: ramp.iter().map(|v| 1.0 - v).collect(),
+        b: ramp,
+        display_max_cd_m2: 1.0,
+    }
+}
+
+#[test]
+fn narrow_and_wide_images_are_written_in_blocks_sized_by_bytes() {
+    use exr::meta::BlockDescription;
+    // A 1-pixel-wide column took one RLE chunk per pixel (1 × 4194304: 4 M chunks, 47 s):
+    // now tiles of at most BLOCK_BYTES, about n × 12 / 65536 chunks.
+    for (w, h) in [
+        (1usize, 1usize << 16),
+        (3, 40_000),
+        (1 << 20, 1),
+        (200_000, 3),
+    ] {
+        let d = ramp_display(w, h);
+        let mut buf = Cursor::new(Vec::new());
+        vexr::write_display(&d, &mut buf).unwrap();
+        let (chunks, blocks) = written_blocks(buf.get_ref());
+        let bytes = w * h * 12;
+        let most = bytes.div_ceil(vexr::BLOCK_BYTES) + h.max(w).div_ceil(5461);
+        assert!(
+            chunks <= most,
+            "{w}x{h}: {chunks} chunks, expected ≤ {most}"
+        );
+        match blocks {
+            BlockDescription::Tiles(t) => {
+                assert!(
+                    t.tile_size.0 * t.tile_size.1 * 12 <= vexr::BLOCK_BYTES,
+                    "{w}x{h}"
+                );
+            }
+            BlockDescription::ScanLines => panic!("{w}x{h} written in scan lines"),
+        }
+        assert_eq!(
+            vexr::BlockLayout::for_image(w, h, 12).chunk_count(w, h),
+            chunks
+        );
+        // Every pixel reads back (1.0 is 1 cd/m² of D65 white: compare Y).
+        let back = decode(buf.get_ref());
+        assert_eq!((back.width, back.height), (w, h));
+        for i in [0, 1, w * h / 2, w * h - 1] {
+            let rgb = [d.r[i], d.g[i], d.b[i]].map(f64::from);
+            assert_xyz(&back, i, srgb_to_xyz(rgb), 2e-4);
+        }
+    }
+    // The pathological sizes of the issue, by the layout alone (not written here).
+    assert_eq!(
+        vexr::BlockLayout::for_image(1, 4_194_304, 12).chunk_count(1, 4_194_304),
+        769
+    );
+    assert!(vexr::BlockLayout::for_image(1, 1 << 27, 12).chunk_count(1, 1 << 27) < 25_000);
+    // Ordinary images keep one scan line per chunk.
+    for (w, h) in [(1920usize, 1080usize), (512, 512), (2, 2)] {
+        let d = ramp_display(w, h);
+        let mut buf = Cursor::new(Vec::new());
+        vexr::write_display(&d, &mut buf).unwrap();
+        assert_eq!(
+            written_blocks(buf.get_ref()),
+            (h, BlockDescription::ScanLines),
+            "{w}x{h}"
+        );
+    }
+}
+
+#[test]
+fn the_view_is_written_and_read_back() {
+    use visadapt::{Projection, View};
+    for view in [
+        View::perspective(37.5, 40, 30),
+        View::angular_fisheye(220.0, 40, 30),
+    ] {
+        let mut image = HdrImage::zeros(40, 30);
+        image.y.fill(1.0);
+        image.view = Some(view);
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        visadapt::io::exr::write_hdr(&image, &mut bytes).unwrap();
+        let back = visadapt::io::decode(bytes.get_ref(), &visadapt::Limits::default()).unwrap();
+        let v = back.view.expect("the view is read back");
+        assert_eq!(v.projection, view.projection);
+        assert!((v.horizontal_deg - view.horizontal_deg).abs() < 1e-12);
+        assert!((v.vertical_deg - view.vertical_deg).abs() < 1e-12);
+    }
+    assert_eq!(
+        visadapt::io::radiance::view_options(&View {
+            projection: Projection::Perspective,
+            horizontal_deg: 60.0,
+            vertical_deg: 35.5
+        }),
+        "-vtv -vh 60 -vv 35.5"
+    );
+    // Without a view, none is invented.
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    let mut image = HdrImage::zeros(4, 4);
+    image.y.fill(1.0);
+    visadapt::io::exr::write_hdr(&image, &mut bytes).unwrap();
+    let back = visadapt::io::decode(bytes.get_ref(), &visadapt::Limits::default()).unwrap();
+    assert_eq!(back.view, None);
+}

@@ -37,6 +37,7 @@ pub fn run(args: MapArgs) -> anyhow::Result<()> {
         view: args.view.view(image.width, image.height),
         ..conditions
     };
+    super::warn_if_default_view(&args.input, &image, &conditions);
 
     progress.inc(1);
     progress.set_message("applying the model");

@@ -64,6 +64,22 @@ pub fn check_output_folder(output: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Warn that acuity is about to use the default view: the file records none and `--fov`
+/// is not given, so degrees become pixels by a guess.
+pub fn warn_if_default_view(
+    path: &Path,
+    image: &HdrImage,
+    conditions: &visadapt::operator::ViewingConditions,
+) {
+    if conditions.acuity && conditions.view.is_none() && image.view.is_none() {
+        log::warn!(
+            "{}: the file does not record its view; the acuity blur assumes a {} degree perspective view (give --fov)",
+            path.display(),
+            visadapt::operator::DEFAULT_FOV_DEG
+        );
+    }
+}
+
 /// Warn that a file without stated units is read as cd/m².
 pub fn warn_if_relative(path: &Path, image: &HdrImage) {
     if !image.absolute_units {

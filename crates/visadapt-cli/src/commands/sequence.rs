@@ -46,6 +46,7 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
         view: args.view.view(scene.width, scene.height),
         ..conditions
     };
+    super::warn_if_default_view(&args.input, &scene, &conditions);
     std::fs::create_dir_all(&args.output).with_context(|| {
         format!(
             "{}: cannot create the output directory",

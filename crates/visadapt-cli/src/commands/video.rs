@@ -207,6 +207,9 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             view: args.view.view(hdr.width, hdr.height),
             ..conditions.clone()
         };
+        if k == 0 {
+            super::warn_if_default_view(input, &hdr, &conditions);
+        }
         let (scene, report) = operator::prepare(&hdr, &conditions).with_context(what)?;
         let state = match eye.as_mut() {
             None => eye.insert(Adaptation::adapted(

@@ -53,6 +53,7 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
         view: args.view.view(reference.width, reference.height),
         ..conditions
     };
+    super::warn_if_default_view(&args.reference, &reference, &conditions);
     let observation = Observation::for_image(&reference, &conditions)?;
     let (viewer, report) = (observation.viewer(), &observation.report);
     // With --glare the two images are compared as they reach the retina, each with its

@@ -58,7 +58,20 @@
 //! [`write_display`] writes a [`DisplayImage`] as 32-bit float R, G, B (RLE) with
 //! `chromaticities` = Rec. 709 and `whiteLuminance` = the display maximum, so RGB (1, 1, 1)
 //! reads back as `L_dmax` cd/m². [`write_hdr`] writes an [`HdrImage`] in the paper's layout:
-//! 32-bit float `X`, `Y`, `Z` (+ `scotopic`) in cd/m² (RLE).
+//! 32-bit float `X`, `Y`, `Z` (+ `scotopic`) in cd/m² (RLE). Blocks are chosen by bytes
+//! ([`BlockLayout`]): scan lines for ordinary images, tiles for very narrow or very wide
+//! ones, so that no shape makes a file of millions of tiny chunks or one huge one.
+//!
+//! # The view
+//!
+//! OpenEXR has no standard attribute for a camera's field of view, which acuity needs
+//! (degrees to pixels). visadapt records it in a custom string attribute of the part,
+//! [`VIEW_ATTRIBUTE`] = `visadaptView`, holding Radiance view options as a Radiance
+//! `VIEW=` line does: `-vt?` (projection: `v` perspective, `a` angular fisheye, `h`
+//! hemispherical fisheye, `c` cylindrical, `s` planisphere, `l` parallel), `-vh` and `-vv`
+//! (full horizontal and vertical angles in degrees), e.g. `-vtv -vh 60 -vv 35.98`.
+//! [`write_hdr`] writes it when the image has a view; [`decode`] reads it back into
+//! [`HdrImage::view`]. Other tools keep or drop it as they do any unknown attribute.
 
 use crate::colour::{self, Chromaticities, Mat3, REC709};
 use crate::{DisplayImage, Error, HdrImage, Limits, Result};
@@ -73,6 +86,9 @@ use std::panic::AssertUnwindSafe;
 
 /// Format name used in error messages.
 const FORMAT: &str = "OpenEXR";
+
+/// Name of the custom attribute holding the view (see the module docs, "The view").
+pub const VIEW_ATTRIBUTE: &str = "visadaptView";
 
 /// Largest number of channels accepted in the part that is read. Our own bound, not from
 /// the OpenEXR specification (which sets none): production renders carry at most a few
@@ -868,6 +884,23 @@ fn upsample_chroma(src: &[f32], w: usize, h: usize, sx: usize, sy: usize) -> Vec
     full
 }
 
+/// The view of [`VIEW_ATTRIBUTE`], if the part has one.
+fn read_view(header: &Header) -> Result<Option<crate::View>> {
+    use exr::meta::attribute::{AttributeValue, Text};
+    let name = Text::new_or_panic(VIEW_ATTRIBUTE);
+    match header.own_attributes.other.get(&name) {
+        None => Ok(None),
+        Some(AttributeValue::Text(t)) => {
+            let view = super::radiance::parse_view_options(&t.to_string(), FORMAT)?;
+            Ok(Some(view))
+        }
+        Some(_) => Err(Error::decode(
+            FORMAT,
+            format!("the {VIEW_ATTRIBUTE} attribute is not a string"),
+        )),
+    }
+}
+
 /// Build the [`HdrImage`] from the planes of `layout`.
 fn to_hdr(
     header: &Header,
@@ -889,7 +922,7 @@ fn to_hdr(
         y: Vec::new(),
         z: Vec::new(),
         scotopic: None,
-        view: None,
+        view: read_view(header)?,
         absolute_units: white_luminance.is_some(),
         adopted_white: adopted_white(header, layout),
     };
@@ -991,29 +1024,117 @@ fn rec709_attribute() -> exr::meta::attribute::Chromaticities {
     }
 }
 
-/// Write one layer of f32 channels `(name, samples)`, RLE, scan lines.
+/// Bytes of uncompressed pixel data the writers aim to put in one block (chunk). Our
+/// choice: large enough that the per-chunk cost (a header, an offset-table entry and one
+/// compression call each) is negligible, small enough that blocks compress in parallel and
+/// a reader holds little per block. The OpenEXR library's default 64 × 64 tiles of four
+/// half channels are 32 KiB.
+pub const BLOCK_BYTES: usize = 64 << 10;
+
+/// Scan lines of fewer bytes than this are grouped into tiles instead (RLE stores one
+/// scan line per chunk, OpenEXR file layout, "Scan line-based images": a 1-pixel-wide
+/// image would take one chunk per pixel). Our choice.
+pub const MIN_LINE_BYTES: usize = 4 << 10;
+
+/// How a written image is divided into blocks: ordinary images (a scan line of
+/// [`MIN_LINE_BYTES`] to 16 × [`BLOCK_BYTES`]) in scan lines, one per chunk as RLE
+/// stores them; narrower or much wider ones in tiles of at most [`BLOCK_BYTES`] (the full
+/// width, or as many pixels of a row as fit, by as many rows as fit). Chosen by bytes, not
+/// lines, so the chunk count stays about `width × height × bytes_per_pixel /
+/// BLOCK_BYTES` whatever the shape: a 1 × 4194304 RGB image is 769 chunks, not 4194304.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlockLayout {
+    /// One scan line per chunk.
+    ScanLines,
+    /// Tiles of `width × height` pixels (edge tiles are cut to the image).
+    Tiles {
+        /// Tile width in pixels.
+        width: usize,
+        /// Tile height in pixels.
+        height: usize,
+    },
+}
+
+impl BlockLayout {
+    /// The layout for a `width × height` image of `bytes_per_pixel` bytes per pixel.
+    pub fn for_image(width: usize, height: usize, bytes_per_pixel: usize) -> Self {
+        let bpp = bytes_per_pixel.max(1);
+        let line = width.saturating_mul(bpp);
+        // Small images keep scan lines: they have few chunks whatever the layout.
+        let small = line.saturating_mul(height) <= BLOCK_BYTES;
+        if small || (MIN_LINE_BYTES..=16 * BLOCK_BYTES).contains(&line) {
+            return BlockLayout::ScanLines;
+        }
+        let tile_width = width.clamp(1, (BLOCK_BYTES / bpp).max(1));
+        let tile_height = height.clamp(1, (BLOCK_BYTES / (tile_width * bpp)).max(1));
+        BlockLayout::Tiles {
+            width: tile_width,
+            height: tile_height,
+        }
+    }
+
+    /// The number of chunks a `width × height` image takes in this layout (RLE).
+    pub fn chunk_count(self, width: usize, height: usize) -> usize {
+        match self {
+            BlockLayout::ScanLines => height,
+            BlockLayout::Tiles {
+                width: tw,
+                height: th,
+            } => width.div_ceil(tw) * height.div_ceil(th),
+        }
+    }
+}
+
+/// The attributes [`write_layer`] writes beside the channels (none by default).
+#[derive(Default)]
+struct LayerMeta<'a> {
+    white_luminance: Option<f32>,
+    chromaticities: Option<exr::meta::attribute::Chromaticities>,
+    adopted_neutral: Option<colour::Xy>,
+    view: Option<&'a crate::View>,
+}
+
+/// Write one layer of f32 channels `(name, samples)`, RLE, in blocks chosen by
+/// [`BlockLayout::for_image`].
 fn write_layer(
     width: usize,
     height: usize,
     channels: Vec<(&'static str, Vec<f32>)>,
-    white_luminance: Option<f32>,
-    chromaticities: Option<exr::meta::attribute::Chromaticities>,
-    adopted_neutral: Option<colour::Xy>,
+    meta: LayerMeta<'_>,
     w: impl std::io::Write + std::io::Seek,
 ) -> Result<()> {
     use exr::prelude::*;
+    let LayerMeta {
+        white_luminance,
+        chromaticities,
+        adopted_neutral,
+        view,
+    } = meta;
     let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
         .into_iter()
         .map(|(name, samples)| AnyChannel::new(name, FlatSamples::F32(samples)))
         .collect();
-    let attributes = LayerAttributes {
+    let mut attributes = LayerAttributes {
         white_luminance,
         adopted_neutral: adopted_neutral.map(|[x, y]| Vec2(x as f32, y as f32)),
         ..LayerAttributes::default()
     };
+    if let Some(v) = view {
+        attributes.other.insert(
+            Text::new_or_panic(VIEW_ATTRIBUTE),
+            AttributeValue::Text(Text::new_or_panic(super::radiance::view_options(v))),
+        );
+    }
+    let blocks = match BlockLayout::for_image(width, height, 4 * list.len()) {
+        BlockLayout::ScanLines => Blocks::ScanLines,
+        BlockLayout::Tiles {
+            width: tw,
+            height: th,
+        } => Blocks::Tiles(Vec2(tw, th)),
+    };
     let encoding = Encoding {
         compression: Compression::RLE,
-        blocks: Blocks::ScanLines,
+        blocks,
         line_order: LineOrder::Increasing,
     };
     let layer = Layer::new(
@@ -1064,17 +1185,20 @@ pub fn write_display(image: &DisplayImage, w: impl std::io::Write + std::io::See
             ("G", image.g.clone()),
             ("B", image.b.clone()),
         ],
-        Some(l),
-        Some(rec709_attribute()),
-        None,
+        LayerMeta {
+            white_luminance: Some(l),
+            chromaticities: Some(rec709_attribute()),
+            ..LayerMeta::default()
+        },
         w,
     )
 }
 
 /// Write an HDR image in the paper's own layout: channels `X`, `Y`, `Z` (+ `scotopic` when
 /// present) as 32-bit floats in cd/m² (scotopic cd/m²), RLE, with the image's adopted white
-/// as `adoptedNeutral` when it has one other than E (the layout's own white). [`decode`] reads it back as an absolute image with
-/// the same adopted white.
+/// as `adoptedNeutral` when it has one other than E (the layout's own white) and its view in
+/// [`VIEW_ATTRIBUTE`]. [`decode`] reads it back as an absolute image with the same adopted
+/// white and view.
 pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Result<()> {
     let mut planes = vec![&image.x, &image.y, &image.z];
     if let Some(s) = &image.scotopic {
@@ -1093,10 +1217,12 @@ pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Re
         image.width,
         image.height,
         channels,
-        None,
-        None,
-        // E is what the layout means without the attribute.
-        image.adopted_white.filter(|w| *w != colour::EQUAL_ENERGY),
+        LayerMeta {
+            // E is what the layout means without the attribute.
+            adopted_neutral: image.adopted_white.filter(|w| *w != colour::EQUAL_ENERGY),
+            view: image.view.as_ref(),
+            ..LayerMeta::default()
+        },
         w,
     )
 }
@@ -1112,7 +1238,16 @@ pub fn write_luminance(
 ) -> Result<()> {
     let plane = y.to_vec();
     check_planes(width, height, &[&plane])?;
-    write_layer(width, height, vec![("Y", plane)], Some(1.0), None, None, w)
+    write_layer(
+        width,
+        height,
+        vec![("Y", plane)],
+        LayerMeta {
+            white_luminance: Some(1.0),
+            ..LayerMeta::default()
+        },
+        w,
+    )
 }
 
 /// Write one plane of numbers that are not luminances (e.g. a
@@ -1126,7 +1261,7 @@ pub fn write_plane(
 ) -> Result<()> {
     let plane = values.to_vec();
     check_planes(width, height, &[&plane])?;
-    write_layer(width, height, vec![("Y", plane)], None, None, None, w)
+    write_layer(width, height, vec![("Y", plane)], LayerMeta::default(), w)
 }
 
 #[cfg(test)]

@@ -7,7 +7,10 @@
 //!   (`O_TMPFILE`) and given its name with `linkat` only when complete, so even a
 //!   `SIGKILL` leaves nothing behind; elsewhere (or on file systems without `O_TMPFILE`)
 //!   it is a named `.visadapt-*.tmp` file, listed while it exists so that
-//!   [`remove_in_flight_files`] can delete it when the process is interrupted.
+//!   [`remove_in_flight_files`] can delete it when the process is interrupted. Setting
+//!   the environment variable `VISADAPT_NAMED_TEMPORARIES=1` makes every output take the
+//!   named path (for file systems that mishandle unnamed files; the tests use it to
+//!   exercise interruption).
 //! * **Permissions.** A new file gets `0666` less the process's umask, as `open(2)` gives
 //!   any new file; a replaced file keeps its permission bits, without setuid, setgid or
 //!   sticky bits.
@@ -147,6 +150,12 @@ pub fn remove_in_flight_files() {
     std::mem::forget(guard);
 }
 
+/// Whether `VISADAPT_NAMED_TEMPORARIES` asks for named temporary files only.
+#[cfg(target_os = "linux")]
+fn named_temporaries_forced() -> bool {
+    std::env::var_os("VISADAPT_NAMED_TEMPORARIES").is_some_and(|v| !v.is_empty() && v != "0")
+}
+
 /// The directory a file at `path` goes into.
 fn parent_dir(path: &Path) -> &Path {
     match path.parent() {
@@ -220,7 +229,9 @@ impl PendingFile {
             )));
         }
         #[cfg(target_os = "linux")]
-        if let Some(file) = unnamed::create(dir) {
+        if !named_temporaries_forced()
+            && let Some(file) = unnamed::create(dir)
+        {
             return Ok(PendingFile {
                 file,
                 target: target.to_path_buf(),

@@ -383,6 +383,33 @@ fn numbers<const N: usize>(key: &str, v: &[u8]) -> Result<[f64; N]> {
     Ok(out)
 }
 
+/// A view as Radiance view options, e.g. `-vtv -vh 60 -vv 35.98` (Radiance's `-vt?` type
+/// letters), the text of a `VIEW=` line and of the OpenEXR
+/// [`VIEW_ATTRIBUTE`](super::exr::VIEW_ATTRIBUTE).
+pub fn view_options(view: &View) -> String {
+    let t = match view.projection {
+        Projection::Perspective => 'v',
+        Projection::Parallel => 'l',
+        Projection::Cylindrical => 'c',
+        Projection::HemisphericalFisheye => 'h',
+        Projection::AngularFisheye => 'a',
+        Projection::Planisphere => 's',
+    };
+    format!(
+        "-vt{t} -vh {} -vv {}",
+        view.horizontal_deg, view.vertical_deg
+    )
+}
+
+/// Parse Radiance view options (as [`view_options`] writes them) over Radiance's default
+/// view; errors name `format`.
+pub(crate) fn parse_view_options(s: &str, format: &'static str) -> Result<View> {
+    parse_view(s, DEFAULT_VIEW).map_err(|e| match e {
+        Error::Decode { reason, .. } => Error::decode(format, reason),
+        other => other,
+    })
+}
+
 /// Apply the options of one `VIEW=` line to `view` (Radiance `image.c`, `sscanview`:
 /// successive view lines modify the same view, so a later option overrides an earlier
 /// one). Reads `-vt?`, `-vh`, `-vv`; every other option and its arguments are skipped.
