@@ -44,6 +44,7 @@ use crate::glare::{self, Glare, VeilReport};
 use crate::mesopic::rod_weight;
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
+use crate::timecourse::Undershoot;
 use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
 use crate::{DisplayImage, Error, HdrImage, Result, View};
 use std::borrow::Cow;
@@ -85,6 +86,13 @@ pub struct ViewingConditions {
     /// [`colour`](crate::colour#chromatic-adaptation-beyond-the-paper)); default
     /// [`WhitePoint::Auto`], the file's; [`WhitePoint::Off`] for the paper's behaviour.
     pub white_point: WhitePoint,
+    /// For time courses ([`sequence::render`](crate::sequence::render), a video, the
+    /// viewer): whether the Eq. 8–9 mapping follows a threshold below its steady state
+    /// (Baker's dip). Default [`Undershoot::Clamped`]: never more contrast than the
+    /// steady state, no shadows clipped; [`Undershoot::InMapping`] is the paper's rule (see
+    /// [`timecourse`](crate::timecourse#bakers-dip-is-not-a-contrast-boost-undershoot-beyond-the-paper)).
+    /// The static operator does not use it.
+    pub undershoot: Undershoot,
 }
 
 impl Default for ViewingConditions {
@@ -99,6 +107,7 @@ impl Default for ViewingConditions {
             view: None,
             white_point: WhitePoint::Auto,
             glare: None,
+            undershoot: Undershoot::Clamped,
         }
     }
 }

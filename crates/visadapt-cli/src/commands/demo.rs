@@ -37,6 +37,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     // The paper's observer, with veiling glare when asked for.
     let conditions = ViewingConditions {
         glare: args.glare.glare(),
+        undershoot: args.time_course.undershoot(),
         ..ViewingConditions::default()
     };
     conditions.validate()?;
