@@ -245,6 +245,36 @@ impl GlareArgs {
     }
 }
 
+/// How a time course maps its frames (timecourse, sequence, video, demo).
+#[derive(Debug, Clone, Args)]
+pub struct TimeCourseArgs {
+    /// What the display mapping does while the cone threshold is below its steady state
+    /// (Baker's dip, minutes after a rise): `clamped` keeps the steady-state contrast (no
+    /// shadows clipped to black; the dip stays in the thresholds, visibility and acuity);
+    /// `in-mapping` is the paper's Eq. 8-9, whose negative offset clips shadows.
+    #[arg(long, value_enum, value_name = "RULE", default_value_t = UndershootArg::Clamped)]
+    pub undershoot: UndershootArg,
+}
+
+/// `--undershoot`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum UndershootArg {
+    /// The mapping never asks for more contrast than the steady state (the default).
+    Clamped,
+    /// The paper's Eq. 8-9 during Baker's dip.
+    InMapping,
+}
+
+impl TimeCourseArgs {
+    /// The library's rule.
+    pub fn undershoot(&self) -> visadapt::timecourse::Undershoot {
+        match self.undershoot {
+            UndershootArg::Clamped => visadapt::timecourse::Undershoot::Clamped,
+            UndershootArg::InMapping => visadapt::timecourse::Undershoot::InMapping,
+        }
+    }
+}
+
 /// Guards on the input (map, visible, tolerance, sequence, video).
 #[derive(Debug, Clone, Args)]
 pub struct LimitsArgs {
@@ -572,6 +602,9 @@ pub struct DemoArgs {
     pub adaptation: AdaptationArgs,
 
     #[command(flatten)]
+    pub time_course: TimeCourseArgs,
+
+    #[command(flatten)]
     pub glare: GlareArgs,
 }
 
@@ -733,6 +766,9 @@ pub struct TimecourseArgs {
     #[command(flatten)]
     pub display: DisplayArgs,
 
+    #[command(flatten)]
+    pub time_course: TimeCourseArgs,
+
     /// Print a JSON array (one object per time) instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -782,6 +818,9 @@ pub struct SequenceArgs {
 
     #[command(flatten)]
     pub limits: LimitsArgs,
+
+    #[command(flatten)]
+    pub time_course: TimeCourseArgs,
 
     /// Print the list of frames as JSON.
     #[arg(long)]
@@ -836,6 +875,9 @@ pub struct VideoArgs {
 
     #[command(flatten)]
     pub limits: LimitsArgs,
+
+    #[command(flatten)]
+    pub time_course: TimeCourseArgs,
 
     /// Print one JSON object per frame (JSON Lines) on standard output as frames are written.
     #[arg(long)]

@@ -100,6 +100,7 @@ fn timecourse_json_is_the_library_report() {
         (0.1, 0.1 * sp),
         &[0.0, 60.0, 210.0, 1800.0],
         80.0,
+        Default::default(),
     )
     .unwrap();
     let expected = report::timecourse_json(&moments);

@@ -534,3 +534,41 @@ fn plot_draws_figures_8_to_10_as_svg_and_png() {
     let info = dec.read_info().unwrap();
     assert_eq!((info.info().width, info.info().height), (1500, 560));
 }
+
+/// Issue 8 §2: during Baker's dip (3 min after 0.1 → 5623 cd/m²) the default mapping keeps
+/// the steady-state contrast (offset ≥ 0); `--undershoot in-mapping` is the paper's rule,
+/// with its negative offset. The thresholds are the same either way.
+#[test]
+fn timecourse_undershoot_rule_changes_the_mapping_not_the_threshold() {
+    let run = |extra: &[&str]| {
+        let out = visadapt()
+            .args([
+                "timecourse",
+                "--from",
+                "0.1",
+                "--to",
+                "5623",
+                "--times",
+                "180",
+                "--json",
+            ])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        json(&out.stdout)[0].clone()
+    };
+    let (clamped, paper) = (run(&[]), run(&["--undershoot", "in-mapping"]));
+    assert!(f(&clamped, "cone_excess_log") < -0.05);
+    assert_eq!(
+        clamped["cone_threshold_cd_m2"],
+        paper["cone_threshold_cd_m2"]
+    );
+    assert!(f(&clamped, "photopic_offset_cd_m2") >= 0.0, "{clamped}");
+    assert!(f(&paper, "photopic_offset_cd_m2") < -1.0, "{paper}");
+    assert!(f(&paper, "photopic_scale") > f(&clamped, "photopic_scale"));
+}

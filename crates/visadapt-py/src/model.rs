@@ -133,8 +133,14 @@ pub fn timecourse(
     display_max: f64,
 ) -> PyResult<Bound<'_, PyAny>> {
     let sp = EQUAL_ENERGY_SP_RATIO;
-    let moments =
-        course::course((from_, from_ * sp), (to, to * sp), &times, display_max).map_err(lib_err)?;
+    let moments = course::course(
+        (from_, from_ * sp),
+        (to, to * sp),
+        &times,
+        display_max,
+        course::Undershoot::default(),
+    )
+    .map_err(lib_err)?;
     json_to_py(py, &report::timecourse_json(&moments))
 }
 

@@ -50,6 +50,7 @@ use crate::local::{self, AdaptationMap, LocalAdaptation, LocalMapping, LocalRepo
 use crate::mesopic::rod_weight;
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
+use crate::timecourse::Undershoot;
 use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
 use crate::{DisplayImage, Error, HdrImage, Result, View};
 use std::borrow::Cow;
@@ -91,6 +92,13 @@ pub struct ViewingConditions {
     /// [`colour`](crate::colour#chromatic-adaptation-beyond-the-paper)); default
     /// [`WhitePoint::Auto`], the file's; [`WhitePoint::Off`] for the paper's behaviour.
     pub white_point: WhitePoint,
+    /// For time courses ([`sequence::render`](crate::sequence::render), a video, the
+    /// viewer): whether the Eq. 8–9 mapping follows a threshold below its steady state
+    /// (Baker's dip). Default [`Undershoot::Clamped`]: never more contrast than the
+    /// steady state, no shadows clipped; [`Undershoot::InMapping`] is the paper's rule (see
+    /// [`timecourse`](crate::timecourse#bakers-dip-is-not-a-contrast-boost-undershoot-beyond-the-paper)).
+    /// The static operator does not use it.
+    pub undershoot: Undershoot,
     /// One adaptation level for the scene (the paper's, the default) or one per pixel.
     pub adaptation: AdaptationMode,
 }
@@ -118,6 +126,7 @@ impl Default for ViewingConditions {
             adaptation: AdaptationMode::Global,
             white_point: WhitePoint::Auto,
             glare: None,
+            undershoot: Undershoot::Clamped,
         }
     }
 }

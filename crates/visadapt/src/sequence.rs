@@ -184,7 +184,8 @@ pub fn render(
     let mut eye = Adaptation::adapted(
         before.world_adaptation_cd_m2,
         before.world_adaptation_scotopic_cd_m2,
-    )?;
+    )?
+    .with_undershoot(conditions.undershoot);
     let (mapping, stats) =
         operator::apply_state_into(&retina, &before, &eye, conditions, &mut out)?;
     drop(retina);

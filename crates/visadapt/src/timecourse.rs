@@ -93,6 +93,24 @@
 //! `scotopic_offset_cd_m2` of [`Mapping`], which [`operator::apply`](crate::operator::apply)
 //! honours per pixel.
 //!
+//! ## Baker's dip is not a contrast boost ([`Undershoot`], beyond the paper)
+//!
+//! During Baker's dip (Fig. 9) the cone threshold is *below* its steady state, so the
+//! paper's rule gives `m(t) > m_∞` and, by Eq. 9, a negative offset `b(t)`: after
+//! 0.1 → 5623 cd/m² (Fig. 12a) every world luminance under `|b|/m(t)` is mapped below
+//! zero and clipped to black (on `sunset-fisheye.hdr` most of the image at 75 s and
+//! 3 min, none at steady state; the README has the figures). The paper introduces `b`
+//! "so that contrast can be reduced and screen brightness can be adjusted separately"
+//! (Sec. 4.3) and calls its 75 s frame "near steady state" (Sec. 5); it never asks for
+//! more display contrast than the steady state gives. So by default
+//! ([`Undershoot::Clamped`]) the mapping uses, per mechanism, `max(T(t), t(L))`, the
+//! threshold never below its steady-state value: then `m(t) ≤ m_∞` and `b(t) ≥ 0`, and
+//! during the dip the frame is the steady-state frame. The dip stays where it was
+//! measured: in the thresholds the state reports ([`Adaptation::log_cone_threshold`]),
+//! in visibility
+//! ([`visibility::Sensitivity::from_time_course`](crate::visibility::Sensitivity::from_time_course))
+//! and in the reported acuity. [`Undershoot::InMapping`] keeps the paper's mapping.
+//!
 //! # Acuity
 //!
 //! The blur stays the Eq. 7 Gaussian of the current world adaptation (the
@@ -203,6 +221,20 @@ const DIP_NORMALISATION: f64 = 3.694_528_049_465_325; // e^2 / 2
 /// adapted level at about 10 minutes", Sec. 3.5.1); a two-stage chain (`x·e^{1−x}`) would
 /// still be 0.03 log below at 10 min.
 const DIP_ORDER: f64 = 2.0;
+
+/// Whether the display mapping (Eq. 8–9) follows a threshold that is below its steady
+/// state (Baker's dip, Fig. 9). See the module docs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Undershoot {
+    /// The mapping uses `max(T(t), t(L))` per mechanism: `m(t) ≤ m_∞`, `b(t) ≥ 0`, no
+    /// shadows clipped by a negative offset. The thresholds, visibility and acuity keep the
+    /// dip. The default (beyond the paper).
+    #[default]
+    Clamped,
+    /// The paper's Eq. 8–9 with the threshold as it is: during the dip `m(t) > m_∞` and
+    /// `b(t) < 0`, which clips world luminances under `|b|/m(t)` to black.
+    InMapping,
+}
 
 /// The rods or the cones.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -373,6 +405,7 @@ pub struct Adaptation {
     cones: Excess,
     rods: Excess,
     since_change_seconds: f64,
+    undershoot: Undershoot,
 }
 
 fn check_luminance(name: &'static str, v: f64) -> Result<f64> {
@@ -397,7 +430,19 @@ impl Adaptation {
             cones: Excess::default(),
             rods: Excess::default(),
             since_change_seconds: 0.0,
+            undershoot: Undershoot::default(),
         })
+    }
+
+    /// The same state with the mapping rule `undershoot` (default [`Undershoot::Clamped`]).
+    pub fn with_undershoot(mut self, undershoot: Undershoot) -> Self {
+        self.undershoot = undershoot;
+        self
+    }
+
+    /// The mapping rule for thresholds below their steady state.
+    pub fn undershoot(&self) -> Undershoot {
+        self.undershoot
     }
 
     /// [`Adaptation::adapted`] to `world_cd_m2` of equal-energy white (scotopic luminance
@@ -505,6 +550,39 @@ impl Adaptation {
         10f64.powf(self.log_rod_threshold())
     }
 
+    /// The cone excess the display mapping follows: [`Adaptation::cone_excess_log`], not
+    /// below 0 with [`Undershoot::Clamped`] (see the module docs).
+    pub fn mapping_cone_excess_log(&self) -> f64 {
+        self.for_mapping(self.cone_excess_log())
+    }
+
+    /// The rod excess the display mapping follows (see
+    /// [`Adaptation::mapping_cone_excess_log`]).
+    pub fn mapping_rod_excess_log(&self) -> f64 {
+        self.for_mapping(self.rod_excess_log())
+    }
+
+    fn for_mapping(&self, excess_log: f64) -> f64 {
+        match self.undershoot {
+            Undershoot::Clamped => excess_log.max(0.0),
+            Undershoot::InMapping => excess_log,
+        }
+    }
+
+    /// The cone threshold the display mapping uses, cd/m²: the current one, or Eq. 4 of
+    /// the world luminance when that is higher and the rule is [`Undershoot::Clamped`].
+    pub fn mapping_cone_threshold_cd_m2(&self) -> f64 {
+        let steady = Mechanism::Cones.log_threshold(self.world_cd_m2);
+        10f64.powf(steady + self.mapping_cone_excess_log())
+    }
+
+    /// The rod threshold the display mapping uses, scotopic cd/m² (see
+    /// [`Adaptation::mapping_cone_threshold_cd_m2`]).
+    pub fn mapping_rod_threshold_scotopic_cd_m2(&self) -> f64 {
+        let steady = Mechanism::Rods.log_threshold(self.world_scotopic_cd_m2);
+        10f64.powf(steady + self.mapping_rod_excess_log())
+    }
+
     /// The highest resolvable frequency for a full-contrast grating now, cycles/degree:
     /// Fig. 7's cutoff at the world luminance, lowered while the threshold is raised (see
     /// the module docs). 0 when the current threshold hides even full contrast.
@@ -540,8 +618,8 @@ impl Adaptation {
             display_adaptation_cd_m2,
         );
         let display_threshold = cone_threshold_cd_m2(lda);
-        let mp = display_threshold / self.cone_threshold_cd_m2();
-        let ms = display_threshold / self.rod_threshold_scotopic_cd_m2();
+        let mp = display_threshold / self.mapping_cone_threshold_cd_m2();
+        let ms = display_threshold / self.mapping_rod_threshold_scotopic_cd_m2();
         Mapping {
             photopic_scale: mp,
             scotopic_scale: ms,
@@ -614,17 +692,19 @@ pub fn check_times(times_seconds: &[f64]) -> Result<()> {
 
 /// An observer adapted to `from` (photopic cd/m², scotopic cd/m²) meets `to` at time 0:
 /// the state at each of `times_seconds` (sorted, ≥ 0), with the mapping for a display of
-/// `display_max_cd_m2` whose observer adapts to half of it (Sec. 4.4).
+/// `display_max_cd_m2` whose observer adapts to half of it (Sec. 4.4), made with the
+/// mapping rule `undershoot`.
 pub fn course(
     from: (f64, f64),
     to: (f64, f64),
     times_seconds: &[f64],
     display_max_cd_m2: f64,
+    undershoot: Undershoot,
 ) -> Result<Vec<Moment>> {
     check_times(times_seconds)?;
     crate::check_luminance("display-max", display_max_cd_m2)?;
     let lda = crate::adaptation::ADAPTATION_FRACTION * display_max_cd_m2;
-    let mut eye = Adaptation::adapted(from.0, from.1)?;
+    let mut eye = Adaptation::adapted(from.0, from.1)?.with_undershoot(undershoot);
     eye.step(0.0, to.0, to.1)?;
     let mut now = 0.0;
     times_seconds

@@ -38,6 +38,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let conditions = ViewingConditions {
         adaptation: args.adaptation.mode(),
         glare: args.glare.glare(),
+        undershoot: args.time_course.undershoot(),
         ..ViewingConditions::default()
     };
     conditions.validate()?;

@@ -44,6 +44,7 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
         .with_context(|| args.input.display().to_string())?;
     let conditions = ViewingConditions {
         view: args.view.view(scene.width, scene.height),
+        undershoot: args.time_course.undershoot(),
         ..conditions
     };
     super::warn_if_default_view(&args.input, &scene, &conditions);

@@ -39,6 +39,7 @@ pub fn run(args: TimecourseArgs) -> anyhow::Result<()> {
         (to, to * sp),
         &args.times,
         args.display.display_max,
+        args.time_course.undershoot(),
     )?;
     if args.json {
         let v = report::timecourse_json(&moments);

@@ -136,12 +136,15 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             args.fps
         );
     }
-    let conditions = args.viewing.conditions(
-        Some(&args.display),
-        None,
-        Some(&args.view),
-        Some(&args.colour),
-    );
+    let conditions = ViewingConditions {
+        undershoot: args.time_course.undershoot(),
+        ..args.viewing.conditions(
+            Some(&args.display),
+            None,
+            Some(&args.view),
+            Some(&args.colour),
+        )
+    };
     conditions.validate()?;
     let (format, ext) = match args.format {
         VideoFormat::Png => (OutputFormat::Png { bits: 8 }, "png"),
@@ -212,10 +215,13 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         }
         let (scene, report) = operator::prepare(&hdr, &conditions).with_context(what)?;
         let state = match eye.as_mut() {
-            None => eye.insert(Adaptation::adapted(
-                report.world_adaptation_cd_m2,
-                report.world_adaptation_scotopic_cd_m2,
-            )?),
+            None => eye.insert(
+                Adaptation::adapted(
+                    report.world_adaptation_cd_m2,
+                    report.world_adaptation_scotopic_cd_m2,
+                )?
+                .with_undershoot(conditions.undershoot),
+            ),
             Some(state) => {
                 state.step_to(dt, &report).with_context(what)?;
                 state

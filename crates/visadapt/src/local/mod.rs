@@ -263,8 +263,10 @@ impl LocalMapping {
     ) -> Self {
         let lda = report.display_adaptation_cd_m2;
         let display_threshold = crate::tvi::cone_threshold_cd_m2(lda);
-        let cone_excess = 10f64.powf(state.cone_excess_log());
-        let rod_excess = 10f64.powf(state.rod_excess_log());
+        // The excess the display mapping follows (Baker's dip clamped unless the state's
+        // rule is the paper's, see `timecourse::Undershoot`).
+        let cone_excess = 10f64.powf(state.mapping_cone_excess_log());
+        let rod_excess = 10f64.powf(state.mapping_rod_excess_log());
         let cone_floor = 10f64.powf(crate::tvi::CONE_FLOOR_LOG);
         let rod_floor = 10f64.powf(crate::tvi::ROD_FLOOR_LOG);
         LocalMapping::new(
