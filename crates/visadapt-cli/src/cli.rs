@@ -750,12 +750,13 @@ OUT_DIR/<input name>.<format>, each written as soon as it is done.";
 
 #[derive(Debug, Args)]
 pub struct TimecourseArgs {
-    /// Luminance the observer is adapted to before t = 0, cd/m².
-    #[arg(long, value_name = "L0", allow_negative_numbers = true, value_parser = positive)]
+    /// Luminance the observer is adapted to before t = 0, cd/m² (0: dark-adapted, as in
+    /// Figs. 8 and 9).
+    #[arg(long, value_name = "L0", allow_negative_numbers = true, value_parser = non_negative)]
     pub from: f64,
 
-    /// Luminance from t = 0 on, cd/m².
-    #[arg(long, value_name = "L1", allow_negative_numbers = true, value_parser = positive)]
+    /// Luminance from t = 0 on, cd/m² (0: darkness, as in Fig. 10).
+    #[arg(long, value_name = "L1", allow_negative_numbers = true, value_parser = non_negative)]
     pub to: f64,
 
     /// Times after the change, seconds, comma-separated, sorted.

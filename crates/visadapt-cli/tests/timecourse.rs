@@ -142,7 +142,7 @@ fn timecourse_refuses_bad_input_in_one_line() {
             "--times",
         ),
         (vec!["--from", "NaN", "--to", "2", "--times", "1"], "--from"),
-        (vec!["--from", "1", "--to", "0", "--times", "1"], "--to"),
+        (vec!["--from", "1", "--to", "-0.5", "--times", "1"], "--to"),
         (vec!["--from", "-1", "--to", "2", "--times", "1"], "--from"),
         (
             vec![
@@ -571,4 +571,42 @@ fn timecourse_undershoot_rule_changes_the_mapping_not_the_threshold() {
     assert!(f(&clamped, "photopic_offset_cd_m2") >= 0.0, "{clamped}");
     assert!(f(&paper, "photopic_offset_cd_m2") < -1.0, "{paper}");
     assert!(f(&paper, "photopic_scale") > f(&clamped, "photopic_scale"));
+}
+
+/// Issue 8 §3: `--to 0` is darkness, so that Fig. 10 can be reproduced from the command
+/// line (failed before: refused as not positive). Hecht's observer (200 cd/m²): the cones
+/// reach their plateau within 5 min, the rods pass them at about 7 min (the Purkinje
+/// break), and in darkness nothing is resolvable (acuity 0).
+#[test]
+fn timecourse_to_darkness_reproduces_figure_10() {
+    let out = visadapt()
+        .args([
+            "timecourse",
+            "--from",
+            "199.526",
+            "--to",
+            "0",
+            "--times",
+            "0,300,390,450,2400",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v = json(&out.stdout);
+    let rows = v.as_array().unwrap();
+    let log = |i: usize, k: &str| f(&rows[i], k).log10();
+    assert!(log(1, "cone_threshold_cd_m2") + 0.72 < 0.02);
+    assert!(log(2, "rod_threshold_scotopic_cd_m2") > log(2, "cone_threshold_cd_m2"));
+    assert!(log(3, "rod_threshold_scotopic_cd_m2") < log(3, "cone_threshold_cd_m2"));
+    let depth = log(0, "cone_threshold_cd_m2") - log(4, "rod_threshold_scotopic_cd_m2");
+    assert!((3.7..4.0).contains(&depth), "{depth}");
+    for row in rows {
+        assert_eq!(f(row, "acuity_cycles_per_degree"), 0.0);
+        assert!(f(row, "photopic_scale").is_finite());
+    }
 }

@@ -110,7 +110,7 @@ fn bad_values_are_named_by_the_flag_as_typed_in_one_style() {
             "'--display-max <L>'",
         ),
         (
-            &["timecourse", "--from", "1", "--to", "0", "--times", "1"],
+            &["timecourse", "--from", "1", "--to", "-1", "--times", "1"],
             "'--to <L1>'",
         ),
     ];

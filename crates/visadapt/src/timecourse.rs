@@ -26,22 +26,47 @@
 //!   second-order shape `−D·x²·e^{2(1−x)}`, `x = t/τ`, with its minimum at `τ` = 3 min
 //!   (Fig. 9). It is the last stage of a chain of three equal first-order stages, so it too
 //!   is stepped exactly;
-//! * **dark**: exponential recovery after a fall in luminance (cones 1 min, rods 8 min,
-//!   Fig. 10). In log threshold this is Rushton's bleaching-recovery picture: the threshold
-//!   approaches its new steady state exponentially.
+//! * **dark**: the after-effect of a fall in luminance, held as an *equivalent
+//!   background* (below). Its log threshold above the absolute threshold decays
+//!   exponentially (cones 1 min, rods 8 min, Fig. 10): in darkness this is Rushton's
+//!   bleaching-recovery picture, the threshold approaching the absolute threshold
+//!   exponentially in log units.
+//!
+//! The light components add to the log threshold; the dark one does not, it adds a
+//! luminance:
+//!
+//! ```text
+//! log T(t) = log t(L + L_eq(t)) + fast + slow − dip,     t(L_eq(t)) = T_dark(t)
+//! ```
+//!
+//! with `t` Eq. 4 or Eq. 5 and `T_dark(t)` the Fig. 10 curve, `log T_dark = floor +
+//! D·e^{−t/τ}`. This is the *equivalent-background* principle (Crawford 1947, "Visual
+//! adaptation in relation to brief conditioning stimuli", Proc. R. Soc. B 134; Stiles &
+//! Crawford; the paper's Sec. 2.3–2.4 and Sec. 3.5 describe the same two processes): during
+//! dark adaptation the eye's raised threshold acts as a veiling background of luminance
+//! `L_eq` that *adds* to the real one. In darkness (`L = 0`) it is exactly Fig. 10. Toward
+//! a lit background it is what an observer measures: the threshold cannot fall below
+//! `t(L)`, and once `L_eq` is small against `L` the background, not the after-effect,
+//! sets it, so recovery toward a bright level ends sooner than recovery toward darkness.
+//! (A log-additive excess, the previous rule, kept the whole after-effect until it had
+//! decayed in log units: Fig. 12b's rods were 2.7 / 2.2 / 1.2 / 0.64 log above Eq. 5 at
+//! 3.5 / 5 / 10 / 15 min; with the equivalent background 2.14 / 1.53 / 0.36 / 0.08.)
 //!
 //! # What a change of luminance does
 //!
 //! Let the steady-state log threshold move by `Δ = log t(L_new) − log t(L_old)`.
 //!
-//! * `Δ < 0` (darker): the threshold does not jump; `|Δ|` is added to the dark component
-//!   and recovers at the dark-adaptation rate.
-//! * `Δ > 0` (brighter): any pending dark excess is used up first (an eye that has not yet
-//!   dark-adapted already behaves as if adapted to a brighter light: Crawford's and
-//!   Stiles' *equivalent background*), then the threshold jumps by the rest `r` and
-//!   overshoots by an onset excess `a·r`, capped at the excess of the paper's own
-//!   experiment (no extrapolation beyond the measured step). The onset goes into the light
-//!   components.
+//! The equivalent background moves with the world luminance so that the threshold does
+//! not jump: `L_eq ← max(0, L_eq + L_old − L_new)`.
+//!
+//! * Darker (`L_new < L_old`): the lost luminance joins the equivalent background, which
+//!   then recovers at the dark-adaptation rate (from an adapted state, `L_eq = L_old −
+//!   L_new`: the Fig. 10 curve of an observer adapted to that luminance).
+//! * Brighter: a pending equivalent background is used up first (an eye that has not yet
+//!   dark-adapted already behaves as if adapted to a brighter light), then the threshold
+//!   jumps by the rest `r = log t(L_new) − log t(L_old + L_eq)` and overshoots by an onset
+//!   excess `a·r`, capped at the excess of the paper's own experiment (no extrapolation
+//!   beyond the measured step). The onset goes into the light components.
 //!
 //! A change in mid-transient therefore restarts from the current thresholds: pending
 //! components keep decaying with their own time constants and the new ones are added. The
@@ -78,10 +103,20 @@
 //!
 //! One tension is left visible rather than tuned away: the paper says its dark sequence
 //! (1412 → 0.1 cd/m², Fig. 12b) is "almost complete after more than 3 minutes". The cones
-//! are (3 % of their drop left at 3.5 min), but rods fitted to Hecht's 7-minute Purkinje
-//! break are still far from their 0.1 cd/m² state then, so the late frames of that
-//! sequence show the cone image over a grey rod offset, and the rod image fades in over the
-//! following 10–20 minutes.
+//! are (0.05 log left at 3.5 min), but rods fitted to Hecht's 7-minute Purkinje break are
+//! still 2.1 log above Eq. 5 then (1.5 at 5 min, 0.36 at 10, 0.08 at 15, 0.02 at 20), so
+//! the late frames of that sequence show the cone image over a grey rod offset, and the rod
+//! image fades in over the following 10–15 minutes. Reaching "almost complete" at 3 minutes
+//! with rods would need a recovery that depends on the bleach (a brief or dim
+//! pre-exposure recovers faster: rate-limited rhodopsin regeneration, Lamb & Pugh 2004),
+//! which Hecht's long, strong pre-adaptation and the paper's Fig. 10 cannot calibrate; we
+//! do not shorten `τ` against Fig. 10.
+//!
+//! Eq. 4/5 are flat below their lower breaks and cannot be inverted there; for the last
+//! 1e-7 (cones) or 7e-6 (rods) log units of a dark component the equivalent background
+//! falls linearly from the break luminance to 0
+//! ([`tvi::log_rod_adaptation_for_threshold`](crate::tvi::log_rod_adaptation_for_threshold)),
+//! so that it vanishes continuously.
 //!
 //! # The display mapping (Eq. 8–9)
 //!
@@ -129,7 +164,8 @@ use crate::operator::{Mapping, Report};
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic::EQUAL_ENERGY_SP_RATIO;
 use crate::tvi::{
-    CONE_FLOOR_LOG, ROD_FLOOR_LOG, cone_threshold_cd_m2, log_cone_threshold, log_rod_threshold,
+    CONE_FLOOR_LOG, ROD_FLOOR_LOG, cone_threshold_cd_m2, log_cone_adaptation_for_threshold,
+    log_cone_threshold, log_rod_adaptation_for_threshold, log_rod_threshold,
     rod_threshold_scotopic_cd_m2,
 };
 use crate::{Error, Result};
@@ -285,6 +321,36 @@ impl Mechanism {
         }
     }
 
+    /// The equivalent background of a dark component `dark_log` (log10 threshold above
+    /// the absolute threshold): the luminance whose steady-state threshold is the Fig. 10
+    /// threshold `floor + dark_log` (Eq. 4/5 inverted; 0 when `dark_log` is 0). In this
+    /// mechanism's unit.
+    pub fn equivalent_background(self, dark_log: f64) -> f64 {
+        if dark_log <= 0.0 {
+            return 0.0;
+        }
+        let y = self.floor_log() + dark_log;
+        10f64.powf(match self {
+            Mechanism::Cones => log_cone_adaptation_for_threshold(y),
+            Mechanism::Rods => log_rod_adaptation_for_threshold(y),
+        })
+    }
+
+    /// log10 threshold at world luminance `luminance` with a dark component `dark_log`
+    /// and no light components: `log t(L + L_eq)`, never below the Fig. 10 threshold
+    /// `floor + dark_log` (exactly that in darkness).
+    fn base_log_threshold(self, luminance: f64, dark_log: f64) -> f64 {
+        if dark_log <= 0.0 {
+            return self.log_threshold(luminance);
+        }
+        let dark = self.floor_log() + dark_log;
+        if luminance == 0.0 {
+            return dark;
+        }
+        self.log_threshold(luminance + self.equivalent_background(dark_log))
+            .max(dark)
+    }
+
     /// The time-course parameters (constants of this module).
     pub fn dynamics(self) -> Dynamics {
         match self {
@@ -329,8 +395,9 @@ struct Excess {
 }
 
 impl Excess {
-    fn total(&self) -> f64 {
-        self.fast + self.slow + self.dark - DIP_NORMALISATION * self.dip[2]
+    /// The light components: log10 units added to the threshold.
+    fn light(&self) -> f64 {
+        self.fast + self.slow - DIP_NORMALISATION * self.dip[2]
     }
 
     fn is_zero(&self) -> bool {
@@ -369,18 +436,24 @@ impl Excess {
         }
     }
 
-    /// The steady-state log threshold moved by `delta` (see the module docs).
-    fn change(&mut self, d: &Dynamics, delta: f64) {
-        if delta < 0.0 {
-            self.dark -= delta;
-        } else if delta > 0.0 {
-            let absorbed = self.dark.clamp(0.0, delta);
-            self.dark -= absorbed;
-            let rise = delta - absorbed;
-            let onset = (d.onset_per_log * rise).min(d.onset_log);
-            self.fast += onset * d.fast_fraction;
-            self.slow += onset * (1.0 - d.fast_fraction);
-            self.dip[0] += onset * d.dip_per_onset;
+    /// The world luminance seen by mechanism `m` changed from `from` to `to` (see the
+    /// module docs).
+    fn change(&mut self, m: Mechanism, d: &Dynamics, from: f64, to: f64) {
+        let before = m.base_log_threshold(from, self.dark);
+        let equivalent = (m.equivalent_background(self.dark) + from - to).max(0.0);
+        self.dark = if equivalent > 0.0 {
+            (m.log_threshold(equivalent) - m.floor_log()).max(0.0)
+        } else {
+            0.0
+        };
+        if equivalent == 0.0 {
+            let rise = m.base_log_threshold(to, self.dark) - before;
+            if rise > 0.0 {
+                let onset = (d.onset_per_log * rise).min(d.onset_log);
+                self.fast += onset * d.fast_fraction;
+                self.slow += onset * (1.0 - d.fast_fraction);
+                self.dip[0] += onset * d.dip_per_onset;
+            }
         }
     }
 }
@@ -474,12 +547,10 @@ impl Adaptation {
         self.rods.propagate(&rd, dt_seconds);
         self.since_change_seconds += dt_seconds;
         if l != self.world_cd_m2 || ls != self.world_scotopic_cd_m2 {
-            let dc = Mechanism::Cones.log_threshold(l)
-                - Mechanism::Cones.log_threshold(self.world_cd_m2);
-            let dr = Mechanism::Rods.log_threshold(ls)
-                - Mechanism::Rods.log_threshold(self.world_scotopic_cd_m2);
-            self.cones.change(&cd, dc);
-            self.rods.change(&rd, dr);
+            self.cones
+                .change(Mechanism::Cones, &cd, self.world_cd_m2, l);
+            self.rods
+                .change(Mechanism::Rods, &rd, self.world_scotopic_cd_m2, ls);
             self.world_cd_m2 = l;
             self.world_scotopic_cd_m2 = ls;
             self.since_change_seconds = 0.0;
@@ -531,13 +602,15 @@ impl Adaptation {
     /// log10 of the current cone threshold (cd/m²).
     pub fn log_cone_threshold(&self) -> f64 {
         let m = Mechanism::Cones;
-        (m.log_threshold(self.world_cd_m2) + self.cones.total()).max(m.floor_log())
+        (m.base_log_threshold(self.world_cd_m2, self.cones.dark) + self.cones.light())
+            .max(m.floor_log())
     }
 
     /// log10 of the current rod threshold (scotopic cd/m²).
     pub fn log_rod_threshold(&self) -> f64 {
         let m = Mechanism::Rods;
-        (m.log_threshold(self.world_scotopic_cd_m2) + self.rods.total()).max(m.floor_log())
+        (m.base_log_threshold(self.world_scotopic_cd_m2, self.rods.dark) + self.rods.light())
+            .max(m.floor_log())
     }
 
     /// The current cone threshold, cd/m² (Eq. 4 once adapted).
@@ -585,9 +658,13 @@ impl Adaptation {
 
     /// The highest resolvable frequency for a full-contrast grating now, cycles/degree:
     /// Fig. 7's cutoff at the world luminance, lowered while the threshold is raised (see
-    /// the module docs). 0 when the current threshold hides even full contrast.
+    /// the module docs). 0 when the current threshold hides even full contrast, and in
+    /// darkness.
     pub fn acuity_cycles_per_degree(&self) -> f64 {
         let (l, ls) = (self.world_cd_m2, self.world_scotopic_cd_m2);
+        if l == 0.0 && ls == 0.0 {
+            return 0.0; // darkness: no grating to resolve
+        }
         let steady = AcuityFilter::new(l, ls);
         if !(l > 0.0 && ls > 0.0) {
             return steady.cutoff_cycles_per_degree;

@@ -60,6 +60,55 @@ pub fn log_rod_threshold(log_adaptation: f64) -> f64 {
     }
 }
 
+/// Eq. 4 inverted: `log10` of the photopic adaptation luminance whose cone threshold is
+/// `10^log_threshold` cd/m²; `-inf` (the dark) at or below the absolute threshold.
+/// `log_cone_threshold(inverse(y)) == y` to rounding wherever Eq. 4 rises. Where the
+/// published branches overlap (within 0.003 log of the upper break) the middle branch is
+/// taken. Below the lower break Eq. 4 is flat and has no inverse: thresholds within 1e-7
+/// log of the floor (what the middle branch gives at the break) map linearly in luminance
+/// from `10^`[`CONE_LOW_BREAK_LOG`] down to 0 (our choice: the inverse is continuous and
+/// reaches 0 with the excess, as the equivalent background of
+/// [`timecourse`](crate::timecourse) needs).
+pub fn log_cone_adaptation_for_threshold(log_threshold: f64) -> f64 {
+    let y = log_threshold - CONE_FLOOR_LOG;
+    if y.is_nan() {
+        return f64::NAN;
+    }
+    if y <= 0.0 {
+        return f64::NEG_INFINITY;
+    }
+    let middle = (y.powf(1.0 / 2.7) - 0.65) / 0.249;
+    if middle < CONE_LOW_BREAK_LOG {
+        CONE_LOW_BREAK_LOG + (y / (0.249 * CONE_LOW_BREAK_LOG + 0.65f64).powf(2.7)).log10()
+    } else if middle < CONE_HIGH_BREAK_LOG {
+        middle
+    } else {
+        log_threshold - CONE_WEBER_OFFSET_LOG
+    }
+}
+
+/// Eq. 5 inverted: `log10` of the scotopic adaptation luminance whose rod threshold is
+/// `10^log_threshold` scotopic cd/m², as [`log_cone_adaptation_for_threshold`] (the
+/// branches overlap within 0.012 log of the upper break; the flat part is reached within
+/// 7e-6 log of the floor).
+pub fn log_rod_adaptation_for_threshold(log_threshold: f64) -> f64 {
+    let y = log_threshold - ROD_FLOOR_LOG;
+    if y.is_nan() {
+        return f64::NAN;
+    }
+    if y <= 0.0 {
+        return f64::NEG_INFINITY;
+    }
+    let middle = (y.powf(1.0 / 2.18) - 1.6) / 0.405;
+    if middle < ROD_LOW_BREAK_LOG {
+        ROD_LOW_BREAK_LOG + (y / (0.405 * ROD_LOW_BREAK_LOG + 1.6f64).powf(2.18)).log10()
+    } else if middle < ROD_HIGH_BREAK_LOG {
+        middle
+    } else {
+        log_threshold - ROD_WEBER_OFFSET_LOG
+    }
+}
+
 /// Eq. 4: cone threshold in cd/m² for an observer adapted to `adaptation_cd_m2`.
 /// Non-positive adaptation gives the absolute threshold 10^-0.72 cd/m²; NaN gives NaN.
 pub fn cone_threshold_cd_m2(adaptation_cd_m2: f64) -> f64 {
@@ -129,6 +178,32 @@ mod tests {
             assert!(c >= prev.0 - 0.004 && r >= prev.1 - 0.012, "at {l}");
             prev = (c, r);
         }
+    }
+
+    #[test]
+    fn inverses_round_trip_above_the_absolute_threshold() {
+        for i in 0..=1000 {
+            let l = -3.9 + i as f64 * 0.0099; // log10 L from -3.9 to 6
+            for (f, inv) in [
+                (
+                    log_cone_threshold as fn(f64) -> f64,
+                    log_cone_adaptation_for_threshold as fn(f64) -> f64,
+                ),
+                (log_rod_threshold, log_rod_adaptation_for_threshold),
+            ] {
+                let y = f(l);
+                if l > -2.59 {
+                    assert!((f(inv(y)) - y).abs() < 1e-9, "at {l}: {y} -> {}", inv(y));
+                }
+            }
+        }
+        assert_eq!(
+            log_cone_adaptation_for_threshold(CONE_FLOOR_LOG),
+            f64::NEG_INFINITY
+        );
+        assert_eq!(log_rod_adaptation_for_threshold(-5.0), f64::NEG_INFINITY);
+        assert!((log_cone_adaptation_for_threshold(1.745) - 3.0).abs() < 1e-12);
+        assert!((log_rod_adaptation_for_threshold(-2.261_827) - -2.0).abs() < 1e-5);
     }
 
     #[test]

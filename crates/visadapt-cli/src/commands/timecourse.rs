@@ -28,9 +28,14 @@ pub fn sorted_times(times: &[f64]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Check a luminance flag that may be 0 (darkness).
+pub fn non_negative(flag: &'static str, v: f64) -> anyhow::Result<f64> {
+    if v == 0.0 { Ok(0.0) } else { positive(flag, v) }
+}
+
 pub fn run(args: TimecourseArgs) -> anyhow::Result<()> {
-    let from = positive("--from", args.from)?;
-    let to = positive("--to", args.to)?;
+    let from = non_negative("--from", args.from)?;
+    let to = non_negative("--to", args.to)?;
     positive("--display-max", args.display.display_max)?;
     sorted_times(&args.times)?;
     let sp = EQUAL_ENERGY_SP_RATIO;
