@@ -59,6 +59,20 @@ class Conditions(TypedDict, total=False):
     """The projection of `fov`: perspective (under 180 degrees, the default) or angular fisheye."""
     acuity: bool
     """Apply the acuity blur, Eq. 7 (default True)."""
+    white_point: Optional[str]
+    """Scene white adapted to D65 by CAT16: "auto" (the file's, default), "none" (the paper), "E", "D65" or "x,y"."""
+    adaptation: Optional[Literal["global", "local"]]
+    """One adaptation level for the scene (the paper, default) or one per pixel."""
+    adaptation_radius: Optional[float]
+    """The neighbourhood of local adaptation, degrees (default 1; needs adaptation="local")."""
+    glare: bool
+    """Veiling glare in the eye, CIE 135/1 glare spread function (default False)."""
+    age: Optional[float]
+    """The glare observer's age, years (default 25; needs glare=True)."""
+    pigmentation: Optional[float]
+    """The glare observer's eye pigmentation, 0 very dark to 1.2 light blue (default 0.5; needs glare=True)."""
+    undershoot: Optional[Literal["clamped", "in-mapping"]]
+    """Time course: whether Baker's dip enters the mapping ("in-mapping", the paper) or not ("clamped", default)."""
 
 class DecodeError(ValueError):
     """A file is not valid data of its format (truncated, corrupt or inconsistent)."""

@@ -5,7 +5,10 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::borrow::Cow;
-use visadapt::operator::ViewingConditions;
+use visadapt::glare::Glare;
+use visadapt::local::LocalAdaptation;
+use visadapt::operator::{AdaptationMode, ViewingConditions};
+use visadapt::timecourse::Undershoot;
 use visadapt::{Error, HdrImage, Projection, View};
 
 /// The keyword arguments every function that maps an image accepts, with their meaning
@@ -21,6 +24,13 @@ pub const KEYWORDS: &[&str] = &[
     "fov",                 // horizontal field of view, degrees
     "projection",          // of the fov: "perspective" (default) or "fisheye" (angular)
     "acuity",              // apply the acuity blur (Eq. 7)
+    "white_point",         // scene white for CAT16: "auto" (default), "none", "E", "D65", "x,y"
+    "adaptation",          // "global" (the paper, default) or "local" (per pixel)
+    "adaptation_radius",   // neighbourhood of local adaptation, degrees
+    "glare",               // veiling glare in the eye (CIE 135/1), off by default
+    "age",                 // glare observer's age, years
+    "pigmentation",        // glare observer's eye pigmentation (0 dark to 1.2 light blue)
+    "undershoot",          // time course: "clamped" (default) or "in-mapping" (the paper)
 ];
 
 /// Parsed keyword arguments.
@@ -33,6 +43,20 @@ pub struct Options {
     pub projection: Option<Projection>,
     pub scale: Option<f64>,
     pub peak: Option<f64>,
+    /// `adaptation_radius`, degrees (with `adaptation="local"`).
+    pub adaptation_radius_deg: Option<f64>,
+    /// `glare`, with the observer's `age` and `pigmentation`.
+    pub glare: bool,
+    pub age_years: Option<f64>,
+    pub pigmentation: Option<f64>,
+}
+
+/// The options of local adaptation: those already set, or the defaults.
+fn local_options(current: &AdaptationMode) -> LocalAdaptation {
+    match current {
+        AdaptationMode::Local(l) => *l,
+        AdaptationMode::Global => LocalAdaptation::default(),
+    }
 }
 
 impl Options {
@@ -45,6 +69,10 @@ impl Options {
             projection: None,
             scale: None,
             peak: None,
+            adaptation_radius_deg: None,
+            glare: false,
+            age_years: None,
+            pigmentation: None,
         };
         let Some(kwargs) = kwargs else {
             return Ok(o);
@@ -70,6 +98,40 @@ impl Options {
                 "hot_pixel_fraction" => c.hot_pixel_fraction = value.extract()?,
                 "fov" => o.fov_deg = Some(value.extract()?),
                 "acuity" => c.acuity = value.extract()?,
+                "white_point" => {
+                    let name: String = value.extract()?;
+                    c.white_point = name.parse().map_err(|e: String| {
+                        PyValueError::new_err(format!("invalid white_point: {e}"))
+                    })?;
+                }
+                "adaptation" => {
+                    let name: String = value.extract()?;
+                    c.adaptation = match name.as_str() {
+                        "global" => AdaptationMode::Global,
+                        "local" => AdaptationMode::Local(local_options(&c.adaptation)),
+                        _ => {
+                            return Err(PyValueError::new_err(format!(
+                                "invalid adaptation '{name}': global or local"
+                            )));
+                        }
+                    }
+                }
+                "adaptation_radius" => o.adaptation_radius_deg = Some(value.extract()?),
+                "glare" => o.glare = value.extract()?,
+                "age" => o.age_years = Some(value.extract()?),
+                "pigmentation" => o.pigmentation = Some(value.extract()?),
+                "undershoot" => {
+                    let name: String = value.extract()?;
+                    c.undershoot = match name.as_str() {
+                        "clamped" => Undershoot::Clamped,
+                        "in-mapping" => Undershoot::InMapping,
+                        _ => {
+                            return Err(PyValueError::new_err(format!(
+                                "invalid undershoot '{name}': clamped or in-mapping"
+                            )));
+                        }
+                    }
+                }
                 "projection" => {
                     let name: String = value.extract()?;
                     o.projection = Some(match name.as_str() {
@@ -85,7 +147,39 @@ impl Options {
                 _ => {} // checked against KEYWORDS above
             }
         }
+        o.finish()?;
         Ok(o)
+    }
+
+    /// The keywords that refine others: the radius of local adaptation, the glare
+    /// observer. Each needs the option it refines.
+    fn finish(&mut self) -> PyResult<()> {
+        let c = &mut self.conditions;
+        if let Some(r) = self.adaptation_radius_deg {
+            match &mut c.adaptation {
+                AdaptationMode::Local(l) => l.radius_deg = r,
+                AdaptationMode::Global => {
+                    return Err(PyValueError::new_err(
+                        "adaptation_radius: give adaptation='local' too",
+                    ));
+                }
+            }
+        }
+        if self.glare {
+            let mut g = Glare::default();
+            if let Some(a) = self.age_years {
+                g.age_years = a;
+            }
+            if let Some(p) = self.pigmentation {
+                g.pigmentation = p;
+            }
+            c.glare = Some(g);
+        } else if self.age_years.is_some() || self.pigmentation.is_some() {
+            return Err(PyValueError::new_err(
+                "age and pigmentation describe the glare observer: give glare=True too",
+            ));
+        }
+        Ok(())
     }
 
     /// Check every value before any pixel is touched.

@@ -14,7 +14,7 @@ use visadapt::observer::Observer;
 use visadapt::operator;
 use visadapt::scotopic::EQUAL_ENERGY_SP_RATIO;
 use visadapt::timecourse::{self as course, Adaptation as State};
-use visadapt::visibility::{self, ToleranceSummary, Viewer};
+use visadapt::visibility::{self, Observation, ToleranceSummary};
 use visadapt::{DisplayImage, report};
 
 type Display<'py> = Bound<'py, PyArray3<f32>>;
@@ -65,6 +65,14 @@ fn lib_err(e: visadapt::Error) -> PyErr {
 ///     projection: of `fov`: "perspective" (under 180 degrees, the default) or "fisheye"
 ///         (angular fisheye, up to 360 degrees).
 ///     acuity: apply the acuity blur (default True).
+///     white_point: the scene white adapted to the display's D65 by CAT16: "auto" (the
+///         file's, default), "none" (the paper's colours), "E", "D65" or "x,y".
+///     adaptation: "global" (one level for the scene, the paper, default) or "local" (each
+///         pixel adapted to its neighbourhood); adaptation_radius: its size, degrees.
+///     glare: veiling glare in the eye (CIE 135/1), default False; age (years, default 25)
+///         and pigmentation (0 very dark to 1.2 light blue, default 0.5) of its observer.
+///     undershoot: time courses only: "clamped" (default) or "in-mapping" (the paper's
+///         Eq. 8-9 during Baker's dip).
 ///
 /// Returns:
 ///     (display, report): `display` is H x W x 3 float32 linear sRGB relative to the display
@@ -166,8 +174,7 @@ pub fn visible<'py>(
     let (d, summary) = detached(py, || {
         let p = options.prepare(&reference.inner).map_err(lib_err)?;
         let test = scaled(&test.inner, p.scale);
-        let (viewer, report) = Viewer::for_image(&p.image, &p.conditions).map_err(lib_err)?;
-        let d = visibility::difference(&p.image, &test, &viewer).map_err(lib_err)?;
+        let (d, report) = visibility::compare(&p.image, &test, &p.conditions).map_err(lib_err)?;
         let summary = report::difference_json(&d, &report, p.scale, None);
         Ok((d, summary))
     })?;
@@ -196,8 +203,9 @@ pub fn tolerance<'py>(
     let (w, h) = (image.inner.width, image.inner.height);
     let (map, summary) = detached(py, || {
         let p = options.prepare(&image.inner).map_err(lib_err)?;
-        let (viewer, report) = Viewer::for_image(&p.image, &p.conditions).map_err(lib_err)?;
-        let map = visibility::tolerance_map(&p.image, &viewer).map_err(lib_err)?;
+        let observation = Observation::for_image(&p.image, &p.conditions).map_err(lib_err)?;
+        let map = visibility::tolerance_map(&p.image, &observation.viewer()).map_err(lib_err)?;
+        let report = observation.report;
         let summary = ToleranceSummary::of(&map, &p.image.y)
             .map(|s| report::tolerance_json(&s, &report, p.scale, None))
             .ok_or_else(|| lib_err(visadapt::Error::invalid("image", "empty", "has no pixels")))?;

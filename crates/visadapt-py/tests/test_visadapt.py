@@ -76,6 +76,16 @@ def map_cases():
             ["--scale", "0.01", "--fov", "200", "--projection", "fisheye", "--display-max", "120"],
             id="GrayRamps-fisheye-dim",
         ),
+        pytest.param(
+            DATA / "GrayRampsHorizontal.exr",
+            ["--adaptation", "local", "--adaptation-radius", "2", "--white-point", "none"],
+            id="GrayRamps-local",
+        ),
+        pytest.param(
+            DATA / "WideFloatRange.exr",
+            ["--glare", "--age", "70", "--pigmentation", "1", "--fov", "40"],
+            id="WideFloatRange-glare",
+        ),
     ]
     if SHARED:
         cases += [
@@ -94,6 +104,8 @@ def kwargs_of(flags):
         name = flag[2:].replace("-", "_")
         if name == "no_acuity":
             out["acuity"] = False
+        elif name == "glare":
+            out["glare"] = True
         else:
             value = next(it)
             try:
@@ -191,6 +203,39 @@ def test_visible_and_tolerance_give_the_cli_reports(tmp_path):
     assert_same_report(summary, want)
     # The CLI's tolerance map, read back as a grey image: Y is the tolerance in cd/m².
     np.testing.assert_allclose(tol, visadapt.read(out).xyz[..., 1], rtol=RTOL)
+
+
+@pytest.mark.parametrize(
+    "flags", [["--glare"], ["--adaptation", "local"]], ids=["glare", "local"]
+)
+def test_visible_and_tolerance_with_glare_or_local_adaptation_give_the_cli_reports(
+    tmp_path, flags
+):
+    a, b = DATA / "WideFloatRange.exr", tmp_path / "brighter.exr"
+    ref = visadapt.read(a)
+    visadapt.write(b, visadapt.from_array(ref.xyz * 1.05))
+    want = cli_json("visible", a, b, "--json", "--fov", 40, *flags)
+    jnd, summary = visadapt.visible(ref, visadapt.read(b), fov=40, **kwargs_of(flags))
+    assert_same_report(summary, want)
+    assert float(jnd.max()) == pytest.approx(summary["max_jnd"], rel=1e-6)
+    out = tmp_path / "tol.exr"
+    want = cli_json("tolerance", a, "-o", out, "--json", "--fov", 40, *flags)
+    want["output"] = None
+    tol, summary = visadapt.tolerance(ref, fov=40, **kwargs_of(flags))
+    assert_same_report(summary, want)
+    np.testing.assert_allclose(tol, visadapt.read(out).xyz[..., 1], rtol=RTOL)
+
+
+def test_refining_keywords_need_what_they_refine():
+    image = visadapt.chart(white=5)
+    with pytest.raises(ValueError, match="adaptation='local'"):
+        visadapt.map(image, adaptation_radius=2)
+    with pytest.raises(ValueError, match="glare=True"):
+        visadapt.map(image, age=70)
+    with pytest.raises(ValueError, match="white_point"):
+        visadapt.map(image, white_point="purple")
+    with pytest.raises(ValueError, match="global or local"):
+        visadapt.map(image, adaptation="regional")
 
 
 def test_numpy_round_trips_keep_every_value(tmp_path):

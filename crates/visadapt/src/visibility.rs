@@ -448,6 +448,31 @@ impl Observation {
     }
 }
 
+/// How visible `test` is against `reference` to the observer the operator would use for
+/// `reference` under `conditions` ([`Observation::for_image`]: global or local adaptation,
+/// acuity from the view), with that observer's report. With glare
+/// ([`ViewingConditions::glare`]) the two images are compared as they reach the retina,
+/// each with its own veil ([`operator::prepare`]), by the observer adapted to the
+/// reference's: a bright light in the field of view then hides what lies near it.
+///
+/// This is `visadapt visible` and the Python package's `visible`.
+pub fn compare(
+    reference: &HdrImage,
+    test: &HdrImage,
+    conditions: &ViewingConditions,
+) -> Result<(Difference, Report)> {
+    let observation = Observation::for_image(reference, conditions)?;
+    let viewer = observation.viewer();
+    let d = if conditions.glare.is_some() {
+        let (r, _) = operator::prepare(reference, conditions)?;
+        let (t, _) = operator::prepare(test, conditions)?;
+        difference(&r, &t, &viewer)?
+    } else {
+        difference(reference, test, &viewer)?
+    };
+    Ok((d, observation.report))
+}
+
 /// The difference between two images in JNDs, per pixel and summarised.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Difference {

@@ -471,3 +471,84 @@ fn without_glare_the_operator_is_the_papers_and_a_sourceless_scene_barely_change
     );
     assert!(lost < 0.04, "{lost}");
 }
+
+/// Issue 11: "a headlight hiding a pedestrian". On the street of [`street`] a figure of
+/// twice the street's luminance (0.5° × 1.5°) stands 2° from the lamp. To the paper's
+/// observer, adapted to the street, it is plainly visible. With glare the lamp's veil there
+/// (Stiles-Holladay, 10·E/θ², gives about 5 cd/m² at 2° for this lamp, 250 times the
+/// street) raises the adaptation, and the figure's 0.02 cd/m² step falls far under the
+/// threshold: hidden, for the global observer (adapted to half the highest visible
+/// luminance of the retinal image, now the lamp's halo) and for local adaptation (adapted
+/// to the veil where the figure is). In this model the veil hides detail only through
+/// adaptation: with the adaptation held at the street's, the veil adds the same light to
+/// both images and the figure stays visible (the JND then drops only by the figure's own
+/// scattered light). Through `visibility::compare`, as `visadapt visible --glare` does.
+#[test]
+fn the_headlight_hides_the_pedestrian() {
+    use visadapt::operator::ViewingConditions;
+    use visadapt::visibility::compare;
+    let (scene, w) = street();
+    let h = scene.height;
+    let ppd = View::perspective(40.0, w, h).pixels_per_degree(w).unwrap();
+    let lamp = w / 2 + (5.0 * ppd).round() as usize;
+    let (cx, half_w, half_h) = (
+        lamp - (2.0 * ppd).round() as usize,
+        (0.25 * ppd).round() as usize,
+        (0.75 * ppd).round() as usize,
+    );
+    let mut test = scene.clone();
+    for j in h / 2 - half_h..=h / 2 + half_h {
+        for i in cx - half_w..=cx + half_w {
+            let k = j * w + i;
+            test.x[k] *= 2.0;
+            test.y[k] *= 2.0;
+            test.z[k] *= 2.0;
+        }
+    }
+    let plain = ViewingConditions::default();
+    let glare = ViewingConditions {
+        glare: Some(Glare::default()),
+        ..ViewingConditions::default()
+    };
+    let (seen, _) = compare(&scene, &test, &plain).unwrap();
+    let (veiled, report) = compare(&scene, &test, &glare).unwrap();
+    println!(
+        "pedestrian 2° from the headlight: {:.2} JND without glare, {:.3} with (adaptation ×{:.1})",
+        seen.max_jnd,
+        veiled.max_jnd,
+        report.glare.as_ref().unwrap().adaptation_ratio(&report)
+    );
+    // The veil alone, for an observer held at the street's adaptation (as if the lamp
+    // had just come on), already takes most of the figure's contrast.
+    let held = ViewingConditions {
+        world_adaptation_cd_m2: Some(
+            report
+                .glare
+                .as_ref()
+                .unwrap()
+                .world_adaptation_without_glare_cd_m2,
+        ),
+        ..glare.clone()
+    };
+    let (veil_only, _) = compare(&scene, &test, &held).unwrap();
+    println!(
+        "  with the veil alone (adaptation held): {:.3} JND",
+        veil_only.max_jnd
+    );
+    let local = |glare: Option<Glare>| ViewingConditions {
+        glare,
+        adaptation: visadapt::operator::AdaptationMode::Local(Default::default()),
+        ..ViewingConditions::default()
+    };
+    let (local_seen, _) = compare(&scene, &test, &local(None)).unwrap();
+    let (local_veiled, _) = compare(&scene, &test, &local(Some(Glare::default()))).unwrap();
+    println!(
+        "  local adaptation: {:.3} JND without glare, {:.3} with",
+        local_seen.max_jnd, local_veiled.max_jnd
+    );
+    assert!(seen.max_jnd > 2.0, "{}", seen.max_jnd);
+    assert!(veiled.max_jnd < 1.0, "{}", veiled.max_jnd);
+    assert!(local_seen.max_jnd > 2.0, "{}", local_seen.max_jnd);
+    assert!(local_veiled.max_jnd < 1.0, "{}", local_veiled.max_jnd);
+    assert!(veil_only.max_jnd > 2.0 && veil_only.max_jnd < seen.max_jnd);
+}

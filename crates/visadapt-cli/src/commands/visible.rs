@@ -10,8 +10,8 @@ use plotters::style::RGBColor;
 use std::path::Path;
 use visadapt::HdrImage;
 use visadapt::io;
-use visadapt::operator::{self, Report, ViewingConditions};
-use visadapt::visibility::{self, Difference, Observation};
+use visadapt::operator::{Report, ViewingConditions};
+use visadapt::visibility::{self, Difference};
 
 pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     // Everything that can be checked before reading is checked first.
@@ -54,18 +54,8 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
         ..conditions
     };
     super::warn_if_default_view(&args.reference, &reference, &conditions);
-    let observation = Observation::for_image(&reference, &conditions)?;
-    let (viewer, report) = (observation.viewer(), &observation.report);
-    // With --glare the two images are compared as they reach the retina, each with its
-    // own veil (the observer adapted to the reference's, above).
-    let (reference, test) = if conditions.glare.is_some() {
-        let (r, _) = operator::prepare(&reference, &conditions)?;
-        let (t, _) = operator::prepare(&test, &conditions)?;
-        (r.into_owned(), t.into_owned())
-    } else {
-        (reference, test)
-    };
-    let d = visibility::difference(&reference, &test, &viewer)?;
+    let (d, report) = visibility::compare(&reference, &test, &conditions)?;
+    let report = &report;
     if d.non_finite_pixels > 0 {
         log::warn!(
             "{} pixels with NaN or infinite values read as black",
