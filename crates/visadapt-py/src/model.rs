@@ -203,7 +203,13 @@ pub fn tolerance<'py>(
     let (w, h) = (image.inner.width, image.inner.height);
     let (map, summary) = detached(py, || {
         let p = options.prepare(&image.inner).map_err(lib_err)?;
-        let observation = Observation::for_image(&p.image, &p.conditions).map_err(lib_err)?;
+        // The tolerance holds for errors of any extent: acuity does not enter it (as the
+        // CLI's `tolerance`).
+        let conditions = visadapt::operator::ViewingConditions {
+            acuity: false,
+            ..p.conditions.clone()
+        };
+        let observation = Observation::for_image(&p.image, &conditions).map_err(lib_err)?;
         let map = visibility::tolerance_map(&p.image, &observation.viewer()).map_err(lib_err)?;
         let report = observation.report;
         let summary = ToleranceSummary::of(&map, &p.image.y)
