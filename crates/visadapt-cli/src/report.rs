@@ -171,3 +171,63 @@ fn local_text(r: &Report) -> String {
         blur,
     )
 }
+
+/// One file of a batch on one line: where it went, the adaptation and what it means.
+pub fn map_line(input: &std::path::Path, output: &std::path::Path, r: &Report) -> String {
+    format!(
+        "{} -> {}: {}x{}, adapted to {} cd/m² ({}), rod weight {}, acuity {} cycles/degree",
+        input.display(),
+        output.display(),
+        r.width,
+        r.height,
+        human(r.world_adaptation_cd_m2),
+        source(r.world_adaptation_source),
+        human(r.mapping.rod_weight),
+        human(r.acuity.cutoff_cycles_per_degree),
+    )
+}
+
+/// A number for people: four significant digits, without an exponent from 0.001 to a
+/// million (`1841`, `0.02512`), with one outside (`3.162e-5`).
+pub fn human(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let magnitude = x.abs().log10().floor();
+    if (-3.0..6.0).contains(&magnitude) {
+        let decimals = (3.0 - magnitude).max(0.0) as usize;
+        let s = format!("{x:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        let s = format!("{x:.3e}");
+        match s.split_once('e') {
+            Some((m, e)) if m.contains('.') => {
+                format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.'))
+            }
+            _ => s,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::human;
+
+    #[test]
+    fn numbers_for_people() {
+        assert_eq!(human(1841.2), "1841");
+        assert_eq!(human(1.8412e3), "1841");
+        assert_eq!(human(5.0), "5");
+        assert_eq!(human(0.025119), "0.02512");
+        assert_eq!(human(0.001), "0.001");
+        assert_eq!(human(999_999.0), "999999");
+        assert_eq!(human(3.16227e-5), "3.162e-5");
+        assert_eq!(human(2.5e7), "2.5e7");
+        assert_eq!(human(-12.5), "-12.5");
+        assert_eq!(human(0.0), "0");
+    }
+}

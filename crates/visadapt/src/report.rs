@@ -124,6 +124,34 @@ pub fn local_json(l: &LocalReport) -> Value {
     })
 }
 
+/// One file of a batch (`visadapt map a.hdr b.exr -o out/ --json`, one line each): the
+/// input and output paths as given, then every key of [`map_json`].
+///
+/// ```
+/// use visadapt::{HdrImage, operator::{map, ViewingConditions}, report};
+/// let mut scene = HdrImage::zeros(8, 8);
+/// scene.y.fill(10.0);
+/// let out = map(&scene, &ViewingConditions::default())?;
+/// let v = report::map_file_json("a.hdr", "out/a.png", &out.report, &out.stats, 1.0);
+/// assert_eq!(v["input"], "a.hdr");
+/// assert_eq!(v["output"], "out/a.png");
+/// assert_eq!(v["adaptation_cd_m2"], 5.0);
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn map_file_json(
+    input: &str,
+    output: &str,
+    r: &Report,
+    stats: &PixelStats,
+    input_scale: f64,
+) -> Value {
+    let mut v = json!({ "input": input, "output": output });
+    if let (Value::Object(head), Value::Object(rest)) = (&mut v, map_json(r, stats, input_scale)) {
+        head.extend(rest);
+    }
+    v
+}
+
 /// What the glare stage did ([`operator::prepare`](crate::operator::prepare) with
 /// `ViewingConditions::glare`), `null` when it was off: the observer, the veiling luminance
 /// at the fixation point (the image centre), the adaptation without glare and how many
