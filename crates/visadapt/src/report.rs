@@ -80,7 +80,9 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
         "acuity_cycles_per_degree": r.acuity.cutoff_cycles_per_degree,
         "snellen": r.snellen(),
         "threshold_contrast": r.acuity.threshold_contrast,
+        "acuity_contrast_used": r.acuity.gain_at_cutoff,
         "acuity_fallback": r.acuity.fallback,
+        "acuity_extrapolated": r.acuity.extrapolated,
         "acuity_blur_sigma_deg": r.acuity.sigma_deg,
         "acuity_applied": r.acuity_applied,
         "blur_sigma_px": m.blur_sigma_px,
@@ -97,6 +99,9 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
         "pixels_non_finite": stats.non_finite,
         "pixels_negative": stats.negative,
         "pixels_clipped": stats.clipped,
+        "pixels_clipped_fraction": stats.clipped as f64 / (r.width * r.height).max(1) as f64,
+        "highest_visible_display_cd_m2": r.highest_visible_display_cd_m2(),
+        "display_max_to_show_highest_visible_cd_m2": r.display_max_to_show_highest_visible(),
         "adaptation": if r.local.is_some() { "local" } else { "global" },
         "local": r.local.as_ref().map(local_json),
     })
@@ -205,8 +210,10 @@ pub fn observer_json(o: &Observer) -> Value {
         "acuity_cycles_per_degree": o.acuity_cycles_per_degree(),
         "snellen": o.snellen(),
         "threshold_contrast": o.acuity.threshold_contrast,
+        "acuity_contrast_used": o.acuity.gain_at_cutoff,
         "acuity_blur_sigma_deg": o.acuity.sigma_deg,
         "acuity_fallback": o.acuity.fallback,
+        "acuity_extrapolated": o.acuity.extrapolated,
     })
 }
 
