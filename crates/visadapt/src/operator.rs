@@ -332,7 +332,8 @@ impl Report {
     /// Weber range) or if this one already does.
     pub fn display_max_to_show_highest_visible(&self) -> Option<f64> {
         let m = &self.mapping;
-        if !(self.highest_visible_display_cd_m2() > m.display_max_cd_m2 * (1.0 + 1e-9)) {
+        let shown = self.highest_visible_display_cd_m2();
+        if shown.is_nan() || shown <= m.display_max_cd_m2 * (1.0 + 1e-9) {
             return None;
         }
         // Display value per unit of t_p(L_da): hv/t_p(L_wa) + k·hv_s/t_s(L_wa,s).
