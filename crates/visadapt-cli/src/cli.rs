@@ -376,21 +376,69 @@ impl Cli {
 }
 
 impl MapArgs {
-    /// `--bits` is for PNG output and `--quality` for JPEG: refuse them with another format.
-    fn check_format_flags(&self) -> Result<(), String> {
+    /// Whether `-o` names a folder: several inputs, a path ending in `/`, or an existing
+    /// folder.
+    pub fn output_is_folder(&self) -> bool {
+        if self.output.as_os_str() == "-" {
+            return false;
+        }
+        self.inputs.len() > 1
+            || self.output.as_os_str().to_string_lossy().ends_with('/')
+            || self.output.is_dir()
+    }
+
+    /// The output format: `--format`, else the output file's extension, else PNG (a
+    /// folder). `None` for a file whose extension names no format we write.
+    pub fn format_kind(&self) -> Option<FormatArg> {
+        if let Some(f) = self.format {
+            return Some(f);
+        }
+        if self.output_is_folder() || self.output.as_os_str() == "-" {
+            return Some(FormatArg::Png);
+        }
         let ext = self
             .output
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase)
             .unwrap_or_default();
-        if self.bits.is_some() && ext != "png" {
+        FormatArg::from_extension(&ext)
+    }
+
+    /// `--bits` is for PNG output and `--quality` for JPEG: refuse them with another format;
+    /// `--format` must agree with the output file's extension.
+    fn check_format_flags(&self) -> Result<(), String> {
+        if self.output.as_os_str() == "-" && self.inputs.len() > 1 {
+            return Err("several inputs go into a folder, not to standard output ('-o -')".into());
+        }
+        if self.inputs.iter().filter(|i| i.as_os_str() == "-").count() > 1 {
+            return Err("standard input ('-') can be read only once".into());
+        }
+        if let (Some(f), false) = (self.format, self.output_is_folder()) {
+            let ext = self
+                .output
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(str::to_ascii_lowercase)
+                .unwrap_or_default();
+            if let Some(by_name) = FormatArg::from_extension(&ext)
+                && by_name != f
+            {
+                return Err(format!(
+                    "--format {} contradicts the extension of '{}'",
+                    f.name(),
+                    self.output.display()
+                ));
+            }
+        }
+        let kind = self.format_kind();
+        if self.bits.is_some() && kind != Some(FormatArg::Png) {
             return Err(format!(
                 "--bits applies to PNG output only, not to '{}'",
                 self.output.display()
             ));
         }
-        if self.quality.is_some() && !matches!(ext.as_str(), "jpg" | "jpeg") {
+        if self.quality.is_some() && kind != Some(FormatArg::Jpeg) {
             return Err(format!(
                 "--quality applies to JPEG output only, not to '{}'",
                 self.output.display()
@@ -400,15 +448,54 @@ impl MapArgs {
     }
 }
 
+/// The values of `--format`: the display-image formats `map` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FormatArg {
+    /// PNG, sRGB, 8 or 16 bits (--bits).
+    Png,
+    /// JPEG, sRGB (--quality).
+    #[value(alias = "jpg")]
+    Jpeg,
+    /// OpenEXR, linear Rec. 709, 1.0 = --display-max.
+    Exr,
+}
+
+impl FormatArg {
+    /// The format a file extension (lower case, without the dot) names.
+    pub fn from_extension(ext: &str) -> Option<Self> {
+        match ext {
+            "png" => Some(FormatArg::Png),
+            "jpg" | "jpeg" => Some(FormatArg::Jpeg),
+            "exr" => Some(FormatArg::Exr),
+            _ => None,
+        }
+    }
+
+    /// The name `--format` takes, also the extension of the files it writes into a folder.
+    pub fn name(self) -> &'static str {
+        match self {
+            FormatArg::Png => "png",
+            FormatArg::Jpeg => "jpg",
+            FormatArg::Exr => "exr",
+        }
+    }
+}
+
 const MAP_EXAMPLES: &str = "\
 Examples:
   visadapt map scene.hdr -o scene.png
   visadapt map render.exr --peak 0.05 -o moonlight.png     # the scene lit at moonlight level
   visadapt map photo.pfm --scale 179 -o out.jpg           # PFM in W/sr/m², to cd/m²
   visadapt map scene.hdr --fov 40 --json -o out.exr       # linear EXR + JSON report
+  visadapt map a.hdr b.exr c.pfm -o out/ --format jpg     # a batch: out/a.jpg, out/b.jpg, ...
+  cat scene.hdr | visadapt map - -o - > scene.png         # a pipe (report on stderr)
 
 Input: Radiance .hdr/.pic (RGBE/XYZE), OpenEXR (RGB, Y, or X/Y/Z/scotopic), PFM.
-Output (by extension): .png (8 or 16 bit sRGB), .jpg, .exr (linear, 1.0 = --display-max).";
+Output (by extension or --format): .png (8 or 16 bit sRGB), .jpg, .exr (linear, 1.0 =
+--display-max).
+Batches: with several inputs, -o is a folder (created if missing) and each input is written
+there under its own name with the format's extension; one line per file (JSON Lines with
+--json), and the exit status is 1 if any input failed, the others still written.";
 
 const OBSERVER_EXAMPLES: &str = "\
 Examples:
@@ -417,12 +504,23 @@ Examples:
 
 #[derive(Debug, Args)]
 pub struct MapArgs {
-    /// Input HDR image (format detected from its contents).
-    pub input: PathBuf,
+    /// Input HDR images (format detected from their contents); '-' reads standard input.
+    #[arg(value_name = "INPUT", required = true)]
+    pub inputs: Vec<PathBuf>,
 
-    /// Output image; the format follows the extension (.png, .jpg/.jpeg, .exr).
+    /// Output image, or a folder for several inputs (or a path ending in '/', or an
+    /// existing folder); the format follows the extension (.png, .jpg/.jpeg, .exr) or
+    /// --format. '-' writes standard output (the report then goes to standard error).
     #[arg(short, long)]
     pub output: PathBuf,
+
+    /// Output format [default: the output's extension; png into a folder or to '-'].
+    #[arg(long, value_enum, value_name = "FORMAT")]
+    pub format: Option<FormatArg>,
+
+    /// Files mapped at the same time in a batch (each holds its own image in memory).
+    #[arg(short, long, value_name = "N", default_value_t = std::num::NonZeroUsize::MIN)]
+    pub jobs: std::num::NonZeroUsize,
 
     #[command(flatten)]
     pub units: UnitsArgs,

@@ -14,7 +14,7 @@ pub fn observer_text(o: &Observer) -> String {
          scotopic scale m_s (Eq. 3)    {:.4e}\n\
          rod weight k (Eq. 6)          {:.4}\n\
          acuity (Fig. 7)               {:.2} cycles/degree ({})\n\
-         acuity blur (Eq. 7)           sigma {:.4} deg, threshold contrast {:.4}{}\n",
+         acuity blur (Eq. 7)           sigma {:.4} deg, {}\n",
         o.adaptation_cd_m2,
         o.scotopic_adaptation_cd_m2,
         o.display_max_cd_m2,
@@ -27,13 +27,69 @@ pub fn observer_text(o: &Observer) -> String {
         o.acuity_cycles_per_degree(),
         o.snellen(),
         o.acuity.sigma_deg,
-        o.acuity.threshold_contrast,
-        if o.acuity.fallback {
-            " (below the rod Weber range: held at 0.403)"
-        } else {
-            ""
-        },
+        acuity_contrast(&o.acuity),
     )
+}
+
+/// The contrast the acuity filter passes at the cutoff, the one Eq. 7 asks for when they
+/// differ, and whether Fig. 7 was extrapolated.
+pub fn acuity_contrast(a: &visadapt::acuity::AcuityFilter) -> String {
+    let mut s = if a.fallback {
+        format!(
+            "contrast at the cutoff {:.4} (Eq. 7 asks for {:.4}: below the rod Weber range, \
+             held at the rod Weber fraction)",
+            a.gain_at_cutoff, a.threshold_contrast
+        )
+    } else {
+        format!("contrast at the cutoff {:.4} (Eq. 7)", a.gain_at_cutoff)
+    };
+    if a.extrapolated {
+        s += &format!(
+            "; Fig. 7 extrapolated: Shaler's data span 10^{} to 10^{} cd/m²",
+            visadapt::acuity::SHALER_MIN_LOG,
+            visadapt::acuity::SHALER_MAX_LOG
+        );
+    }
+    s
+}
+
+/// The clipping lines of a map report: how many pixels, and when more than 1 % did, why
+/// and what to do.
+pub fn clipping_text(r: &Report, stats: &PixelStats) -> String {
+    if stats.clipped == 0 {
+        return String::new();
+    }
+    let n = (r.width * r.height).max(1);
+    let share = 100.0 * stats.clipped as f64 / n as f64;
+    let mut s = format!(
+        "clipped                       {} pixels ({share:.1} %) above the display maximum\n",
+        stats.clipped
+    );
+    if share > 1.0 {
+        let m = &r.mapping;
+        s += &format!(
+            "  why: the model shows the highest visible luminance ({:.4e} cd/m²) at {:.1} cd/m² on \
+             a {} cd/m² display adapted to {} cd/m²: Eq. 1-4 keep the world observer's \
+             contrast steps, and this display has fewer\n",
+            r.highest_visible_cd_m2,
+            r.highest_visible_display_cd_m2(),
+            m.display_max_cd_m2,
+            r.display_adaptation_cd_m2,
+        );
+        s += &match r.display_max_to_show_highest_visible() {
+            Some(d) => format!(
+                "  what to do: --display-max {:.0} (or more) shows it unclipped; or accept the \
+                 clipping (hues kept, highlights darkened)\n",
+                d.ceil()
+            ),
+            None => {
+                "  what to do: a brighter display does not help here (the highlight grows with \
+                     the display maximum); raise --world-adaptation, or accept the clipping\n"
+                    .to_string()
+            }
+        };
+    }
+    s
 }
 
 /// The chromatic adaptation used, in words.
@@ -95,7 +151,7 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
          thresholds (Eq. 4, 5)         cones {:.4e} cd/m², rods {:.4e} scotopic cd/m²\n\
          scale factors (Eq. 3)         m_p {:.4e}, m_s {:.4e}\n\
          rod weight k (Eq. 6)          {:.4}\n\
-         acuity (Fig. 7, Eq. 7)        {:.2} cycles/degree ({}), threshold contrast {:.4}{}\n\
+         acuity (Fig. 7, Eq. 7)        {:.2} cycles/degree ({}), {}\n\
          view                          {} {:.1} deg ({}), {} pixels/degree\n\
          acuity blur                   {}\n\
          white point                   {}\n",
@@ -116,12 +172,7 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
         m.rod_weight,
         r.acuity.cutoff_cycles_per_degree,
         r.snellen(),
-        r.acuity.threshold_contrast,
-        if r.acuity.fallback {
-            " (fallback below the rod Weber range)"
-        } else {
-            ""
-        },
+        acuity_contrast(&r.acuity),
         projection(r.view.projection),
         r.view.horizontal_deg,
         source(r.view_source),
@@ -130,14 +181,7 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
         white_point(r),
     ) + &glare_text(r)
         + &local_text(r)
-        + &if stats.clipped > 0 {
-            format!(
-                "clipped                       {} pixels above the display maximum\n",
-                stats.clipped
-            )
-        } else {
-            String::new()
-        }
+        + &clipping_text(r, stats)
 }
 
 /// The local-adaptation lines of the map report (nothing for global adaptation).
@@ -170,4 +214,64 @@ fn local_text(r: &Report) -> String {
         k.p50,
         blur,
     )
+}
+
+/// One file of a batch on one line: where it went, the adaptation and what it means.
+pub fn map_line(input: &std::path::Path, output: &std::path::Path, r: &Report) -> String {
+    format!(
+        "{} -> {}: {}x{}, adapted to {} cd/m² ({}), rod weight {}, acuity {} cycles/degree",
+        input.display(),
+        output.display(),
+        r.width,
+        r.height,
+        human(r.world_adaptation_cd_m2),
+        source(r.world_adaptation_source),
+        human(r.mapping.rod_weight),
+        human(r.acuity.cutoff_cycles_per_degree),
+    )
+}
+
+/// A number for people: four significant digits, without an exponent from 0.001 to a
+/// million (`1841`, `0.02512`), with one outside (`3.162e-5`).
+pub fn human(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let magnitude = x.abs().log10().floor();
+    if (-3.0..6.0).contains(&magnitude) {
+        let decimals = (3.0 - magnitude).max(0.0) as usize;
+        let s = format!("{x:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        let s = format!("{x:.3e}");
+        match s.split_once('e') {
+            Some((m, e)) if m.contains('.') => {
+                format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.'))
+            }
+            _ => s,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::human;
+
+    #[test]
+    fn numbers_for_people() {
+        assert_eq!(human(1841.2), "1841");
+        assert_eq!(human(1.8412e3), "1841");
+        assert_eq!(human(5.0), "5");
+        assert_eq!(human(0.025119), "0.02512");
+        assert_eq!(human(0.001), "0.001");
+        assert_eq!(human(999_999.0), "999999");
+        assert_eq!(human(3.16227e-5), "3.162e-5");
+        assert_eq!(human(2.5e7), "2.5e7");
+        assert_eq!(human(-12.5), "-12.5");
+        assert_eq!(human(0.0), "0");
+    }
 }

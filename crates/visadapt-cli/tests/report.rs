@@ -202,3 +202,107 @@ fn map_json_reports_local_adaptation() {
         .failure()
         .stderr(predicates::str::contains("adaptation-radius"));
 }
+
+/// Issue 8 §5 (failed before: `acuity_fallback` was true by rounding in the rod Weber range,
+/// the text printed Eq. 7's contrast as if used, and nothing said Fig. 7 was extrapolated).
+#[test]
+fn observer_reports_the_contrast_used_and_extrapolation() {
+    let run = |l: &str, json_out: bool| {
+        let mut cmd = visadapt();
+        cmd.args(["observer", l]);
+        if json_out {
+            cmd.arg("--json");
+        }
+        let out = cmd.output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        out.stdout
+    };
+    // Rod Weber range (0.05 .. 0.5 cd/m², rods more sensitive): no fallback, the contrast
+    // used is Eq. 7's.
+    for l in ["0.05", "0.1", "0.2", "0.3", "0.5"] {
+        let v = json(&run(l, true));
+        assert_eq!(v["acuity_fallback"], false, "{l}: {v}");
+        assert_eq!(v["acuity_contrast_used"], v["threshold_contrast"]);
+        assert_eq!(v["acuity_extrapolated"], false);
+    }
+    // 1e-3 cd/m²: Eq. 7 has no solution (t/L > 1); the text gives both contrasts.
+    let v = json(&run("1e-3", true));
+    assert_eq!(v["acuity_fallback"], true);
+    let used = v["acuity_contrast_used"].as_f64().unwrap();
+    assert!((used - 10f64.powf(-0.395)).abs() < 1e-12);
+    assert!(v["threshold_contrast"].as_f64().unwrap() > 1.0);
+    let text = String::from_utf8(run("1e-3", false)).unwrap();
+    assert!(
+        text.contains("contrast at the cutoff 0.4027 (Eq. 7 asks for"),
+        "{text}"
+    );
+    // 1e-6 cd/m²: beyond Shaler's data.
+    assert_eq!(json(&run("1e-6", true))["acuity_extrapolated"], true);
+    let text = String::from_utf8(run("1e-6", false)).unwrap();
+    assert!(text.contains("Fig. 7 extrapolated"), "{text}");
+    let text = String::from_utf8(run("10", false)).unwrap();
+    assert!(
+        !text.contains("extrapolated") && !text.contains("asks for"),
+        "{text}"
+    );
+}
+
+/// Issue 8 §5 (failed before: only a count). A scene whose adaptation is in Eq. 4's Weber
+/// range (half its pixels at 2000 cd/m², the rest at 200) on the default 80 cd/m² display:
+/// the whites go to 2·L_wa → t_p(40)·10^1.255 = 94.1 cd/m² and clip. The report says how many,
+/// why, and which display maximum shows them (2 × 10^1.9 = 158.9 cd/m²: the display
+/// observer then is on the Weber branch too).
+#[test]
+fn map_says_how_many_pixels_clip_why_and_what_to_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bright.exr");
+    let mut im = visadapt::HdrImage::zeros(64, 64);
+    for k in 0..im.len() {
+        let l = if k % 2 == 0 { 2000.0 } else { 200.0 };
+        (im.x[k], im.y[k], im.z[k]) = (l, l, l); // grey of the file's equal-energy white
+    }
+    im.absolute_units = true;
+    visadapt::io::exr::write_hdr(&im, &mut std::fs::File::create(&input).unwrap()).unwrap();
+    let out = dir.path().join("out.png");
+    let run = |extra: &[&str]| {
+        let o = visadapt()
+            .args([
+                "map",
+                input.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "--fov",
+                "40",
+            ])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        o.stdout
+    };
+    let v = json(&run(&["--json"]));
+    assert!(v["pixels_clipped_fraction"].as_f64().unwrap() > 0.45, "{v}");
+    let shown = v["highest_visible_display_cd_m2"].as_f64().unwrap();
+    assert!((shown - 94.1).abs() < 0.2, "{shown}");
+    let need = v["display_max_to_show_highest_visible_cd_m2"]
+        .as_f64()
+        .unwrap();
+    assert!((need - 158.9).abs() < 0.5, "{need}");
+    let text = String::from_utf8(run(&[])).unwrap();
+    assert!(
+        text.contains("pixels (50.0 %) above the display maximum"),
+        "{text}"
+    );
+    assert!(
+        text.contains("why:") && text.contains("--display-max 159"),
+        "{text}"
+    );
+    // On that display nothing clips and the report says nothing more.
+    let v = json(&run(&["--json", "--display-max", "170"]));
+    assert_eq!(v["pixels_clipped"], 0, "{v}");
+    assert!(v["display_max_to_show_highest_visible_cd_m2"].is_null());
+}

@@ -30,7 +30,18 @@
 //! 2.6e-3 cd/m²) the equation has no solution at all. There the threshold contrast is held
 //! at the rod Weber fraction 10^-0.395 = 0.403 (Eq. 5's upper branch), so the blur keeps
 //! growing as the cutoff frequency falls, continuously and monotonically. The report flags
-//! when this fallback is in use.
+//! when this fallback is in use and prints both contrasts: the one the filter passes at the
+//! cutoff ([`AcuityFilter::gain_at_cutoff`]) and the one Eq. 7 asks for
+//! ([`AcuityFilter::threshold_contrast`]). Inside the rod Weber range the threshold contrast
+//! *is* the Weber fraction, up to rounding (`10^(log L − 0.395)/L`), so the comparison
+//! allows [`FALLBACK_TOLERANCE`]: the fallback is used only where the two differ.
+//!
+//! # Beyond Shaler's data
+//!
+//! Fig. 7 covers "the range from daylight down to starlight", from about 50 cycles/degree
+//! at 3 log cd/m² to about 2 at −3.3 log cd/m² (Sec. 3.4). Outside
+//! [[`SHALER_MIN_LOG`], [`SHALER_MAX_LOG`]] the cutoff is the fit's extrapolation, and
+//! [`AcuityFilter::extrapolated`] says so.
 
 use crate::tvi::{ROD_WEBER_OFFSET_LOG, cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
 use std::f64::consts::PI;
@@ -47,6 +58,19 @@ const FIT_BASE: f64 = 25.72;
 /// Floor on the cutoff frequency where the fit would fall below it (under ~1e-8 cd/m², far
 /// below the absolute threshold of vision); the value follows the project's model notes §2.1.
 pub const MIN_CUTOFF_CYCLES_PER_DEGREE: f64 = 0.5;
+
+/// Relative tolerance of the fallback test: the threshold contrast must exceed the rod
+/// Weber fraction by more than rounding (a few ulps of `10^(log L − 0.395)/L`) to count as
+/// below the Weber range. Our choice, far below any meaningful difference.
+pub const FALLBACK_TOLERANCE: f64 = 1e-9;
+
+/// Lowest background of Shaler's acuity data as the paper describes Fig. 7, log10 cd/m²
+/// ("about 2 cycles/degree at −3.3 log cd/m²", Sec. 3.4).
+pub const SHALER_MIN_LOG: f64 = -3.3;
+
+/// Highest background of Shaler's acuity data as the paper describes Fig. 7, log10 cd/m²
+/// ("about 50 cycles/degree at 3 log cd/m²", Sec. 3.4).
+pub const SHALER_MAX_LOG: f64 = 3.0;
 
 /// Grating frequency of 20/20 vision: a 1 arcminute stroke, i.e. 30 cycles/degree (Snellen
 /// letters are 5 arcmin tall on a 5×5 stroke grid).
@@ -95,6 +119,9 @@ pub struct AcuityFilter {
     pub gain_at_cutoff: f64,
     /// True when the fallback below the rod Weber range is in use.
     pub fallback: bool,
+    /// True when the adaptation luminance is outside Fig. 7's data
+    /// ([`SHALER_MIN_LOG`] to [`SHALER_MAX_LOG`]): the cutoff is extrapolated.
+    pub extrapolated: bool,
     /// Standard deviation of the Gaussian, degrees of visual angle.
     pub sigma_deg: f64,
 }
@@ -107,7 +134,9 @@ impl AcuityFilter {
         let c = threshold_contrast(adaptation_cd_m2, adaptation_scotopic_cd_m2);
         let weber = rod_weber_fraction();
         // NaN (no adaptation information) also takes the fallback.
-        let fallback = c.is_nan() || c > weber;
+        let fallback = c.is_nan() || c > weber * (1.0 + FALLBACK_TOLERANCE);
+        let log_l = adaptation_cd_m2.log10();
+        let extrapolated = !(SHALER_MIN_LOG..=SHALER_MAX_LOG).contains(&log_l);
         let gain = if fallback { weber } else { c };
         let sigma_deg = (gain.recip().ln() / 2.0).sqrt() / (PI * cutoff);
         AcuityFilter {
@@ -115,6 +144,7 @@ impl AcuityFilter {
             threshold_contrast: c,
             gain_at_cutoff: gain,
             fallback,
+            extrapolated,
             sigma_deg,
         }
     }
@@ -141,6 +171,37 @@ mod tests {
         // Hand computation: 1 cd/m² → 17.25·atan(0.35) + 25.72 = 31.53.
         assert!((cutoff_cycles_per_degree(1.0) - 31.533).abs() < 0.01);
         assert_eq!(cutoff_cycles_per_degree(0.0), MIN_CUTOFF_CYCLES_PER_DEGREE);
+    }
+
+    /// Issue 8 §5 (failed before: `c > weber` was true by rounding for part of the rod
+    /// Weber range). Wherever the rods are on Eq. 5's Weber branch and the more sensitive
+    /// system, no fallback applies and the filter passes exactly Eq. 7's contrast.
+    #[test]
+    fn no_fallback_inside_the_rod_weber_range() {
+        let mut checked = 0;
+        for i in 0..=2000 {
+            let l = 10f64.powf(-1.7 + i as f64 * 0.0008); // 0.02 .. 0.8 cd/m²
+            let ls = l * 2.261; // above 10^-1.44 scotopic cd/m²: rod Weber range
+            let f = AcuityFilter::new(l, ls);
+            assert!(
+                !f.fallback,
+                "fallback at {l} cd/m²: c = {:e}",
+                f.threshold_contrast
+            );
+            assert_eq!(f.gain_at_cutoff, f.threshold_contrast);
+            checked += 1;
+        }
+        assert_eq!(checked, 2001);
+        assert!(AcuityFilter::new(2e-3, 4.5e-3).fallback);
+    }
+
+    /// Issue 8 §5: outside Fig. 7's -3.3 to 3 log cd/m² the cutoff is extrapolated.
+    #[test]
+    fn extrapolation_beyond_shalers_data_is_flagged() {
+        assert!(AcuityFilter::new(1e-6, 2.261e-6).extrapolated);
+        assert!(AcuityFilter::new(1e4, 2.261e4).extrapolated);
+        assert!(!AcuityFilter::new(1e-3, 2.261e-3).extrapolated);
+        assert!(!AcuityFilter::new(1e3, 2.261e3).extrapolated);
     }
 
     #[test]

@@ -76,6 +76,7 @@
 //! before the veil, since that estimate is not linear), so the veil raises both the cone
 //! and the rod adaptation.
 
+use crate::limits::saturating_f32;
 use crate::{Error, HdrImage, Projection, Result, View};
 use realfft::RealFftPlanner;
 use rustfft::FftPlanner;
@@ -774,10 +775,13 @@ impl Grid {
                 let veil = |plane: &[f64]| weights.iter().map(|(k, w)| plane[*k] * w).sum::<f64>();
                 let vy = veil(veils[1]);
                 sum += vy;
-                x[i] = keep * px[0] + veil(veils[0]) as f32;
-                y[i] = keep * px[1] + vy as f32;
-                z[i] = keep * px[2] + veil(veils[2]) as f32;
-                s[i] = keep * px[3] + veil(veils[3]) as f32;
+                // In f64, saturating at f32::MAX: near several f32::MAX pixels the sum
+                // exceeds the f32 range (it became +inf, then a black, "non-finite" pixel).
+                let add = |c: f32, v: f64| saturating_f32(f64::from(keep) * f64::from(c) + v);
+                x[i] = add(px[0], veil(veils[0]));
+                y[i] = add(px[1], vy);
+                z[i] = add(px[2], veil(veils[2]));
+                s[i] = add(px[3], veil(veils[3]));
             }
             sum
         };

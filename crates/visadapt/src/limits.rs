@@ -10,6 +10,17 @@ use crate::error::{Error, LimitsExceeded, Result};
 /// 1.6e9 cd/m² (Wyszecki & Stiles, *Color Science*, 2nd ed., 1982, Table 1(4.4)).
 pub const MAX_LUMINANCE_CD_M2: f64 = 1e19;
 
+/// `v` as `f32`, saturating finite values at ±`f32::MAX` instead of overflowing to ±Inf
+/// (`as` rounds them to infinity); Inf and NaN pass through.
+#[inline]
+pub fn saturating_f32(v: f64) -> f32 {
+    if v.is_finite() {
+        v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
+    } else {
+        v as f32
+    }
+}
+
 /// `v` for a message: in exponent form when it is very large or very small.
 fn number(v: f64) -> String {
     if v.is_finite() && v != 0.0 && !(1e-6..1e16).contains(&v.abs()) {

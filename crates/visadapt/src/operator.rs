@@ -310,6 +310,51 @@ impl Report {
     pub fn snellen(&self) -> String {
         acuity::snellen(self.acuity.cutoff_cycles_per_degree)
     }
+
+    /// Display luminance of a neutral at the highest visible luminance, cd/m²: `m_p·L +
+    /// b_p + k·(m_s·L_s + b_s)`. Above `display_max_cd_m2` the scene's whites clip. In the
+    /// cone Weber range (`L_wa` ≥ 10^1.9 cd/m²) on the default 80 cd/m² display the rules
+    /// of Sec. 4.4 put `2·L_wa` at `t_p(40)·10^1.255` = 94.1 cd/m²: the display observer at
+    /// 40 cd/m² has a higher threshold contrast (Eq. 4's middle branch, 6.5 %) than the
+    /// world observer (Weber, 5.6 %), so keeping the world's JNDs needs more range.
+    pub fn highest_visible_display_cd_m2(&self) -> f64 {
+        let m = &self.mapping;
+        m.photopic_scale * self.highest_visible_cd_m2
+            + m.photopic_offset_cd_m2
+            + m.rod_weight
+                * (m.scotopic_scale * self.highest_visible_scotopic_cd_m2 + m.scotopic_offset_cd_m2)
+    }
+
+    /// The smallest display maximum `L_dmax` (cd/m², adapted to `L_dmax/2` as in Sec. 4.4)
+    /// that shows the highest visible luminance of this report's scene without clipping,
+    /// with the same world adaptation; `None` if no display can (the display value of the
+    /// highest visible luminance grows as fast as `L_dmax` once `L_dmax/2` is in Eq. 4's
+    /// Weber range) or if this one already does.
+    pub fn display_max_to_show_highest_visible(&self) -> Option<f64> {
+        let m = &self.mapping;
+        let shown = self.highest_visible_display_cd_m2();
+        if shown.is_nan() || shown <= m.display_max_cd_m2 * (1.0 + 1e-9) {
+            return None;
+        }
+        // Display value per unit of t_p(L_da): hv/t_p(L_wa) + k·hv_s/t_s(L_wa,s).
+        let per_threshold = self.highest_visible_cd_m2 / self.cone_threshold_cd_m2
+            + m.rod_weight * self.highest_visible_scotopic_cd_m2
+                / self.rod_threshold_scotopic_cd_m2;
+        // (With a relative slack of 1e-9: in Eq. 4's Weber range the value is exactly `d`.)
+        let fits = |d: f64| {
+            cone_threshold_cd_m2(ADAPTATION_FRACTION * d) * per_threshold <= d * (1.0 + 1e-9)
+        };
+        let (mut lo, mut hi) = (m.display_max_cd_m2, crate::MAX_LUMINANCE_CD_M2);
+        if !fits(hi) {
+            return None;
+        }
+        // t_p(D/2)/D never increases with D (Eq. 4's slope is at most 1): bisect in log D.
+        for _ in 0..200 {
+            let mid = (lo * hi).sqrt();
+            if fits(mid) { hi = mid } else { lo = mid }
+        }
+        Some(hi)
+    }
 }
 
 /// Counts of pixels that needed a rule applied.
@@ -837,6 +882,13 @@ impl Coefficients {
     }
 }
 
+/// Display-relative value above which a pixel counts as clipped in
+/// [`PixelStats::clipped`]: 1 plus 2^-10, a quarter of an 8-bit step, so that whites the
+/// model puts exactly at `L_dmax` (`2·L_wa` whenever both observers are on Eq. 4's Weber
+/// branch) are not counted for rounding (a D65 neutral comes out of the XYZ-to-sRGB matrix
+/// with red 4e-4 above green). Every pixel above 1 is still scaled down to it.
+pub const CLIP_COUNT_ABOVE: f32 = 1.0 + 1.0 / 1024.0;
+
 #[inline(always)]
 pub(crate) fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelStats {
     let mut clipped = 0u32;
@@ -844,7 +896,7 @@ pub(crate) fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelSt
         let (rr, gg, bb) = (r.max(0.0), g.max(0.0), b.max(0.0));
         let m = rr.max(gg).max(bb);
         let over = m > 1.0;
-        clipped += u32::from(over);
+        clipped += u32::from(m > CLIP_COUNT_ABOVE);
         let scale = if over { 1.0 / m } else { 1.0 };
         (*r, *g, *b) = (rr * scale, gg * scale, bb * scale);
     }

@@ -80,7 +80,9 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
         "acuity_cycles_per_degree": r.acuity.cutoff_cycles_per_degree,
         "snellen": r.snellen(),
         "threshold_contrast": r.acuity.threshold_contrast,
+        "acuity_contrast_used": r.acuity.gain_at_cutoff,
         "acuity_fallback": r.acuity.fallback,
+        "acuity_extrapolated": r.acuity.extrapolated,
         "acuity_blur_sigma_deg": r.acuity.sigma_deg,
         "acuity_applied": r.acuity_applied,
         "blur_sigma_px": m.blur_sigma_px,
@@ -97,6 +99,9 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
         "pixels_non_finite": stats.non_finite,
         "pixels_negative": stats.negative,
         "pixels_clipped": stats.clipped,
+        "pixels_clipped_fraction": stats.clipped as f64 / (r.width * r.height).max(1) as f64,
+        "highest_visible_display_cd_m2": r.highest_visible_display_cd_m2(),
+        "display_max_to_show_highest_visible_cd_m2": r.display_max_to_show_highest_visible(),
         "adaptation": if r.local.is_some() { "local" } else { "global" },
         "local": r.local.as_ref().map(local_json),
     })
@@ -122,6 +127,34 @@ pub fn local_json(l: &LocalReport) -> Value {
         "rod_weight": quantiles_json(&l.rod_weight),
         "blur_sigma_px": l.acuity_sigma_px.as_ref().map(quantiles_json),
     })
+}
+
+/// One file of a batch (`visadapt map a.hdr b.exr -o out/ --json`, one line each): the
+/// input and output paths as given, then every key of [`map_json`].
+///
+/// ```
+/// use visadapt::{HdrImage, operator::{map, ViewingConditions}, report};
+/// let mut scene = HdrImage::zeros(8, 8);
+/// scene.y.fill(10.0);
+/// let out = map(&scene, &ViewingConditions::default())?;
+/// let v = report::map_file_json("a.hdr", "out/a.png", &out.report, &out.stats, 1.0);
+/// assert_eq!(v["input"], "a.hdr");
+/// assert_eq!(v["output"], "out/a.png");
+/// assert_eq!(v["adaptation_cd_m2"], 5.0);
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn map_file_json(
+    input: &str,
+    output: &str,
+    r: &Report,
+    stats: &PixelStats,
+    input_scale: f64,
+) -> Value {
+    let mut v = json!({ "input": input, "output": output });
+    if let (Value::Object(head), Value::Object(rest)) = (&mut v, map_json(r, stats, input_scale)) {
+        head.extend(rest);
+    }
+    v
 }
 
 /// What the glare stage did ([`operator::prepare`](crate::operator::prepare) with
@@ -177,8 +210,10 @@ pub fn observer_json(o: &Observer) -> Value {
         "acuity_cycles_per_degree": o.acuity_cycles_per_degree(),
         "snellen": o.snellen(),
         "threshold_contrast": o.acuity.threshold_contrast,
+        "acuity_contrast_used": o.acuity.gain_at_cutoff,
         "acuity_blur_sigma_deg": o.acuity.sigma_deg,
         "acuity_fallback": o.acuity.fallback,
+        "acuity_extrapolated": o.acuity.extrapolated,
     })
 }
 

@@ -41,12 +41,43 @@ pub const EQUAL_ENERGY_SP_RATIO: f64 = 2.261;
 /// Never negative, and finite for finite input.
 #[inline]
 pub fn from_xyz(x: f32, y: f32, z: f32) -> f32 {
-    (COEFF_X * x + COEFF_Y * y + COEFF_Z * z).max(0.0)
+    // Computed at a quarter scale (exact: powers of two), so that no product overflows
+    // near f32::MAX and the sum cannot be Inf − Inf = NaN; clamped there, then scaled back:
+    // the same value as the plain sum wherever that is finite, at most f32::MAX.
+    const Q: f32 = 0.25;
+    let quarter = (Q * COEFF_X) * x + (Q * COEFF_Y) * y + (Q * COEFF_Z) * z;
+    quarter.clamp(0.0, Q * f32::MAX) * 4.0
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn finite_for_every_finite_input() {
+        let m = f32::MAX;
+        for (x, y, z) in [
+            (m, m, m),
+            (-m, m, m),
+            (m, -m, -m),
+            (0.0, m, m),
+            (-m, 0.0, 0.0),
+        ] {
+            let v = from_xyz(x, y, z);
+            assert!(v.is_finite() && v >= 0.0, "{x} {y} {z}: {v}");
+        }
+        assert_eq!(from_xyz(0.0, m, m), m);
+        // Unchanged where the plain sum is finite.
+        let plain = |x: f32, y: f32, z: f32| (COEFF_X * x + COEFF_Y * y + COEFF_Z * z).max(0.0);
+        for (x, y, z) in [
+            (1.0, 1.0, 1.0),
+            (0.3, 2.5, 7.0),
+            (1e30, 1e30, 1e30),
+            (1e-30, 3e-30, 0.0),
+        ] {
+            assert_eq!(from_xyz(x, y, z), plain(x, y, z));
+        }
+    }
 
     #[test]
     fn equal_energy_white_has_sp_2_26() {

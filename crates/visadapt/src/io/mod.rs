@@ -75,12 +75,53 @@ pub fn read_into(
 /// The file is also registered as an input that no output of this process may replace
 /// ([`output::protect_input`]).
 pub fn read_bytes(path: &Path, limits: &Limits, bytes: &mut Vec<u8>) -> Result<InputFormat> {
-    use std::io::Read;
     let mut file = std::fs::File::open(path)?;
     output::protect_input(path, &file)?;
+    let on_disk = file
+        .metadata()
+        .ok()
+        .filter(|m| m.is_file())
+        .map(|m| m.len());
+    read_bytes_from(&mut file, on_disk, limits, bytes)
+}
+
+/// Read an HDR image from a stream (standard input, a pipe, a socket), whatever its
+/// format, with the same bounds as [`read_bytes`]: the format is detected from the first
+/// bytes, and no more is read than the header says the pixels need and the memory budget
+/// allows. The rest of the stream is left unread.
+///
+/// ```
+/// use visadapt::{HdrImage, Limits, io};
+/// let mut scene = HdrImage::zeros(4, 2);
+/// scene.y.fill(3.0);
+/// let mut exr = std::io::Cursor::new(Vec::new());
+/// io::exr::write_hdr(&scene, &mut exr)?;
+/// let back = io::read_from(exr.get_ref().as_slice(), &Limits::default())?;
+/// assert_eq!((back.width, back.height), (4, 2));
+/// assert!((back.y[0] - 3.0).abs() < 1e-6);
+/// // An endless stream of zeros costs one read of the first bytes.
+/// let err = io::read_from(std::io::repeat(0), &Limits::default()).unwrap_err();
+/// assert!(err.to_string().contains("unrecognised"));
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn read_from(mut reader: impl std::io::Read, limits: &Limits) -> Result<HdrImage> {
+    let mut bytes = Vec::new();
+    read_bytes_from(&mut reader, None, limits, &mut bytes)?;
+    decode(&bytes, limits)
+}
+
+/// [`read_bytes`] from any reader; `on_disk` is its length when known (a regular file), to
+/// reserve the memory at once but no more than there are bytes.
+fn read_bytes_from(
+    reader: &mut impl std::io::Read,
+    on_disk: Option<u64>,
+    limits: &Limits,
+    bytes: &mut Vec<u8>,
+) -> Result<InputFormat> {
+    use std::io::Read;
     bytes.clear();
     let head_len = (HEAD_LEN as u64).min(limits.max_memory_bytes);
-    (&mut file).take(head_len).read_to_end(bytes)?;
+    reader.by_ref().take(head_len).read_to_end(bytes)?;
     let format = detect(bytes).ok_or_else(|| unrecognised(bytes))?;
     let complete = (bytes.len() as u64) < head_len;
     if complete {
@@ -102,19 +143,17 @@ pub fn read_bytes(path: &Path, limits: &Limits, bytes: &mut Vec<u8>) -> Result<I
     if want < bytes.len() as u64 {
         bytes.truncate(want as usize);
     } else if want > bytes.len() as u64 {
-        let on_disk = file
-            .metadata()
-            .ok()
-            .filter(|m| m.is_file())
-            .map(|m| m.len());
         let reserve = want
             .min(on_disk.unwrap_or(want))
             .saturating_sub(bytes.len() as u64);
         limits.check_memory("the file's bytes", Some(bytes.len() as u64 + reserve))?;
+        // A stream's length is unknown: it grows as it is read, not to what a header says.
+        let reserve = if on_disk.is_some() { reserve } else { 0 };
         bytes
             .try_reserve_exact(usize::try_from(reserve).unwrap_or(usize::MAX))
             .map_err(|_| out_of_memory("the file's bytes", reserve))?;
-        (&mut file)
+        reader
+            .by_ref()
             .take(want - bytes.len() as u64)
             .read_to_end(bytes)?;
     }
@@ -196,6 +235,35 @@ impl OutputFormat {
             ))),
         }
     }
+}
+
+/// Encode a display image in `format` into `w`, any writer (standard output, a pipe, a
+/// socket): the file is built in memory first, so that nothing is written when encoding
+/// fails and formats that seek (OpenEXR) work on streams.
+///
+/// ```
+/// use visadapt::{DisplayImage, io::{self, OutputFormat}};
+/// let image = DisplayImage { width: 2, height: 1, r: vec![0.5; 2], g: vec![0.5; 2],
+///                            b: vec![0.5; 2], display_max_cd_m2: 100.0 };
+/// let mut out = Vec::new();
+/// io::write_display_to(&image, OutputFormat::Png { bits: 8 }, &mut out)?;
+/// assert!(out.starts_with(b"\x89PNG"));
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn write_display_to(
+    image: &DisplayImage,
+    format: OutputFormat,
+    mut w: impl std::io::Write,
+) -> Result<()> {
+    let mut buf = std::io::Cursor::new(Vec::new());
+    match format {
+        OutputFormat::Png { bits } => display::write_png(image, bits, &mut buf)?,
+        OutputFormat::Jpeg { quality } => display::write_jpeg(image, quality, &mut buf)?,
+        OutputFormat::Exr => exr::write_display(image, &mut buf)?,
+    }
+    w.write_all(buf.get_ref())?;
+    w.flush()?;
+    Ok(())
 }
 
 /// Write a display image to `path` in `format`, atomically: the file appears complete or
