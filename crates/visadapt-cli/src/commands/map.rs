@@ -120,8 +120,9 @@ fn map_file(
     super::warn_if_default_view(input, &image, &conditions);
 
     step(format!("applying the model to {}", input.display()));
-    let out = operator::map(&image, &conditions).with_context(|| input.display().to_string())?;
-    drop(image);
+    // The input's planes become the display's (one image in memory, not two).
+    let out =
+        operator::map_owned(image, &conditions).with_context(|| input.display().to_string())?;
     let stats = out.stats;
     if stats.non_finite > 0 {
         log::warn!(
