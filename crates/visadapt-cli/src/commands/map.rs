@@ -288,6 +288,8 @@ fn output_format(args: &MapArgs) -> anyhow::Result<OutputFormat> {
         Some(FormatArg::Png) => OutputFormat::Png { bits: 8 },
         Some(FormatArg::Jpeg) => OutputFormat::Jpeg { quality: 90 },
         Some(FormatArg::Exr) => OutputFormat::Exr,
+        Some(FormatArg::Tiff) => OutputFormat::Tiff,
+        Some(FormatArg::Hdr) => OutputFormat::Radiance,
         None => OutputFormat::from_path(&args.output)?,
     };
     Ok(match format {
