@@ -458,6 +458,11 @@ pub enum FormatArg {
     Jpeg,
     /// OpenEXR, linear Rec. 709, 1.0 = --display-max.
     Exr,
+    /// TIFF, 32-bit float linear Rec. 709, 1.0 = --display-max.
+    #[value(alias = "tif")]
+    Tiff,
+    /// Radiance RGBE, linear Rec. 709, read back in cd/m².
+    Hdr,
 }
 
 impl FormatArg {
@@ -467,6 +472,8 @@ impl FormatArg {
             "png" => Some(FormatArg::Png),
             "jpg" | "jpeg" => Some(FormatArg::Jpeg),
             "exr" => Some(FormatArg::Exr),
+            "tif" | "tiff" => Some(FormatArg::Tiff),
+            "hdr" => Some(FormatArg::Hdr),
             _ => None,
         }
     }
@@ -477,6 +484,8 @@ impl FormatArg {
             FormatArg::Png => "png",
             FormatArg::Jpeg => "jpg",
             FormatArg::Exr => "exr",
+            FormatArg::Tiff => "tif",
+            FormatArg::Hdr => "hdr",
         }
     }
 }
@@ -486,13 +495,15 @@ Examples:
   visadapt map scene.hdr -o scene.png
   visadapt map render.exr --peak 0.05 -o moonlight.png     # the scene lit at moonlight level
   visadapt map photo.pfm --scale 179 -o out.jpg           # PFM in W/sr/m², to cd/m²
+  visadapt map photo.jpg --scale 0.05 -o night.png        # an LDR photo, its white at 0.05 cd/m²
   visadapt map scene.hdr --fov 40 --json -o out.exr       # linear EXR + JSON report
   visadapt map a.hdr b.exr c.pfm -o out/ --format jpg     # a batch: out/a.jpg, out/b.jpg, ...
   cat scene.hdr | visadapt map - -o - > scene.png         # a pipe (report on stderr)
 
-Input: Radiance .hdr/.pic (RGBE/XYZE), OpenEXR (RGB, Y, or X/Y/Z/scotopic), PFM.
-Output (by extension or --format): .png (8 or 16 bit sRGB), .jpg, .exr (linear, 1.0 =
---display-max).
+Input: Radiance .hdr/.pic (RGBE/XYZE), OpenEXR (RGB, Y, or X/Y/Z/scotopic), PFM; and
+8/16-bit PNG, JPEG, TIFF photographs, sRGB undone, white = 1 (give its luminance: --scale).
+Output (by extension or --format): .png (8 or 16 bit sRGB), .jpg, .exr and .tif (linear
+float, 1.0 = --display-max), .hdr (Radiance, reads back in cd/m²).
 Batches: with several inputs, -o is a folder (created if missing) and each input is written
 there under its own name with the format's extension; one line per file (JSON Lines with
 --json), and the exit status is 1 if any input failed, the others still written.";
@@ -509,7 +520,7 @@ pub struct MapArgs {
     pub inputs: Vec<PathBuf>,
 
     /// Output image, or a folder for several inputs (or a path ending in '/', or an
-    /// existing folder); the format follows the extension (.png, .jpg/.jpeg, .exr) or
+    /// existing folder); the format follows the extension (.png, .jpg/.jpeg, .exr, .tif, .hdr) or
     /// --format. '-' writes standard output (the report then goes to standard error).
     #[arg(short, long)]
     pub output: PathBuf,

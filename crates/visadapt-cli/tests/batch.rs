@@ -312,3 +312,236 @@ fn standard_input_that_is_no_image_is_one_clear_error_and_writes_nothing() {
     assert_eq!(out.status.code(), Some(2));
     assert!(usage_error(&out.stderr).contains("read only once"));
 }
+
+#[test]
+fn float_tiff_and_radiance_outputs_hold_the_display_image_of_the_exr_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = grey(20, 10, 50.0);
+    for (i, y) in scene.y.iter_mut().enumerate() {
+        *y *= 0.2 + (i % 9) as f32;
+    }
+    let input = write(dir.path(), "scene.exr", &scene);
+    let run = |name: &str, extra: &[&str]| {
+        let path = dir.path().join(name);
+        let out = visadapt()
+            .arg("map")
+            .arg(&input)
+            .args(["--display-max", "120"])
+            .args(extra)
+            .arg("-o")
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        path
+    };
+    let limits = visadapt::Limits::default();
+    // The EXR output read back: display XYZ in cd/m² (1.0 = 120 cd/m²).
+    let exr = visadapt::io::read(&run("out.exr", &[]), &limits).unwrap();
+    // TIFF: three 32-bit floats a pixel, linear Rec. 709; Y from the Rec. 709 weights.
+    let tif = run("out.tif", &[]);
+    let mut decoder = tiff::decoder::Decoder::new(std::fs::File::open(&tif).unwrap()).unwrap();
+    assert_eq!(decoder.dimensions().unwrap(), (20, 10));
+    assert_eq!(
+        decoder.colortype().unwrap(),
+        tiff::ColorType::RGB(32),
+        "32-bit RGB"
+    );
+    let tiff::decoder::DecodingResult::F32(rgb) = decoder.read_image().unwrap() else {
+        panic!("not float samples");
+    };
+    let mut bright = 0;
+    for (i, px) in rgb.chunks(3).enumerate() {
+        let y = 120.0 * (0.2126 * px[0] + 0.7152 * px[1] + 0.0722 * px[2]);
+        assert!(
+            // The weights are BT.709's, rounded to four digits.
+            (y - exr.y[i]).abs() <= 5e-4 * exr.y[i].max(1.0),
+            "pixel {i}: TIFF {y} cd/m², EXR {}",
+            exr.y[i]
+        );
+        bright += (y > 1.0) as usize;
+    }
+    assert!(bright > 100, "the test image is not black");
+    // The library reads its own float TIFF back in cd/m² (the ImageDescription's white).
+    let back = visadapt::io::read(&tif, &limits).unwrap();
+    assert!(back.absolute_units);
+    for i in 0..back.y.len() {
+        assert!(
+            (back.y[i] - exr.y[i]).abs() <= 1e-4 * exr.y[i].max(1.0),
+            "pixel {i}"
+        );
+    }
+    // Radiance: read back by the library (EXPOSURE and PRIMARIES), RGBE precision (< 1 %).
+    for name in ["out.hdr", "narrow.hdr"] {
+        let extra: &[&str] = if name == "out.hdr" {
+            &[]
+        } else {
+            &["--format", "hdr"]
+        };
+        let hdr = visadapt::io::read(&run(name, extra), &limits).unwrap();
+        assert_eq!((hdr.width, hdr.height), (20, 10));
+        for i in 0..hdr.y.len() {
+            assert!(
+                (hdr.y[i] - exr.y[i]).abs() <= 0.01 * exr.y[i] + 1e-3,
+                "pixel {i}: Radiance {} cd/m², EXR {}",
+                hdr.y[i],
+                exr.y[i]
+            );
+        }
+    }
+    // A narrow image: flat RGBE pixels instead of run-length scanlines.
+    let narrow = write(dir.path(), "narrow.exr", &grey(3, 5, 0.5));
+    for ext in ["exr", "hdr"] {
+        let out = visadapt()
+            .arg("map")
+            .arg(&narrow)
+            .arg("-o")
+            .arg(dir.path().join(format!("narrow-out.{ext}")))
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+    }
+    let a = visadapt::io::read(&dir.path().join("narrow-out.exr"), &limits).unwrap();
+    let b = visadapt::io::read(&dir.path().join("narrow-out.hdr"), &limits).unwrap();
+    assert_eq!((b.width, b.height), (3, 5));
+    for i in 0..a.y.len() {
+        assert!((a.y[i] - b.y[i]).abs() <= 0.01 * a.y[i] + 1e-4, "pixel {i}");
+    }
+    // Into a folder and to standard output by --format.
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    run("out", &["--format", "tiff"]);
+    assert_eq!(files_in(&out_dir), ["scene.tif"]);
+    let out = visadapt()
+        .args(["map", "-", "-o", "-", "--format", "hdr"])
+        .write_stdin(std::fs::read(&input).unwrap())
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(out.stdout.starts_with(b"#?RADIANCE\n"));
+}
+
+/// IEC 61966-2-1, written out independently of the library: encoded [0, 1] to linear.
+fn srgb_to_linear(e: f64) -> f64 {
+    if e <= 0.04045 {
+        e / 12.92
+    } else {
+        ((e + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+#[test]
+fn ldr_photographs_are_read_with_the_srgb_curve_undone_and_their_white_at_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (6u32, 4u32);
+    // 8-bit PNG, code value 128; 16-bit PNG, 40000; 8-bit grey TIFF, 200; a JPEG of a
+    // uniform grey (its code values within 1 of 100).
+    let png8 = dir.path().join("a.png");
+    {
+        let f = std::io::BufWriter::new(std::fs::File::create(&png8).unwrap());
+        let mut e = png::Encoder::new(f, w, h);
+        e.set_color(png::ColorType::Rgb);
+        e.set_depth(png::BitDepth::Eight);
+        e.write_header()
+            .unwrap()
+            .write_image_data(&vec![128u8; (w * h * 3) as usize])
+            .unwrap();
+    }
+    let png16 = dir.path().join("b.png");
+    {
+        let f = std::io::BufWriter::new(std::fs::File::create(&png16).unwrap());
+        let mut e = png::Encoder::new(f, w, h);
+        e.set_color(png::ColorType::Rgb);
+        e.set_depth(png::BitDepth::Sixteen);
+        let v = 40000u16.to_be_bytes();
+        let data: Vec<u8> = (0..w * h * 3).flat_map(|_| v).collect();
+        e.write_header().unwrap().write_image_data(&data).unwrap();
+    }
+    let tif = dir.path().join("c.tif");
+    {
+        let f = std::fs::File::create(&tif).unwrap();
+        let mut e = tiff::encoder::TiffEncoder::new(f).unwrap();
+        e.write_image::<tiff::encoder::colortype::Gray8>(w, h, &vec![200u8; (w * h) as usize])
+            .unwrap();
+    }
+    let jpg = dir.path().join("d.jpg");
+    {
+        let grey = visadapt::colour::srgb_decode(100.0 / 255.0);
+        let n = (w * h) as usize;
+        let image = visadapt::DisplayImage {
+            width: w as usize,
+            height: h as usize,
+            r: vec![grey; n],
+            g: vec![grey; n],
+            b: vec![grey; n],
+            display_max_cd_m2: 100.0,
+        };
+        visadapt::io::write_display(
+            &image,
+            &jpg,
+            visadapt::io::OutputFormat::Jpeg { quality: 100 },
+        )
+        .unwrap();
+    }
+    for (path, code, tolerance) in [
+        (&png8, 128.0 / 255.0, 1e-4),
+        (&png16, 40000.0 / 65535.0, 1e-4),
+        (&tif, 200.0 / 255.0, 1e-4),
+        (&jpg, 100.0 / 255.0, 0.02),
+    ] {
+        let out = visadapt()
+            .arg("map")
+            .arg(path)
+            .args(["--scale", "250", "--fov", "40", "--json", "-o"])
+            .arg(dir.path().join("out.png"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}: {}",
+            path.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let report = json(&out.stdout);
+        // A uniform field: the highest visible luminance is the field's (250 × linear code
+        // value: grey, so Y = each linear channel), the adaptation half of it (Sec. 4.4).
+        let expected = 250.0 * srgb_to_linear(code);
+        let got = report["highest_visible_cd_m2"].as_f64().unwrap();
+        assert!(
+            (got - expected).abs() <= tolerance * expected,
+            "{}: {got} cd/m², expected {expected}",
+            path.display()
+        );
+        assert_eq!(report["input_scale"], 250.0);
+        assert_eq!(report["scene_white"], "D65");
+    }
+    // Without --scale the file's units are unknown: said on standard error.
+    let out = visadapt()
+        .arg("map")
+        .arg(&png8)
+        .args(["--fov", "40", "-o"])
+        .arg(dir.path().join("out.png"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("does not say its units"));
+    // A truncated PNG: one clear error naming the file.
+    let bytes = std::fs::read(&png8).unwrap();
+    let cut = dir.path().join("cut.png");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let out = visadapt()
+        .arg("map")
+        .arg(&cut)
+        .args(["-o"])
+        .arg(dir.path().join("cut-out.png"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let e = one_line_error(&out.stderr);
+    assert!(e.contains("cut.png") && e.contains("PNG"), "{e}");
+    assert!(!dir.path().join("cut-out.png").exists());
+}

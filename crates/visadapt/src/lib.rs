@@ -26,7 +26,7 @@
 //! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
 //! | [`preview`] | the operator at preview resolution, a plain exposure, one pixel probed | Sec. 4, Eq. 4–7 |
 //! | [`visibility`] | thresholds per pixel, differences in JNDs, tolerance map, convergence test | Eq. 4–7, Sec. 6 |
-//! | [`io`] | Radiance, OpenEXR and PFM in; PNG, JPEG and EXR out | — |
+//! | [`io`] | Radiance, OpenEXR and PFM in (and 8/16-bit PNG, JPEG, TIFF photographs); PNG, JPEG, EXR, float TIFF and Radiance out | — |
 //! | `report` | the JSON reports of the CLI, Python and the viewer (feature `json`) | — |
 //!
 //! Units are in the names: `_cd_m2` is photopic cd/m², `_scotopic_cd_m2` is scotopic cd/m²

@@ -71,9 +71,11 @@ pub struct Limits {
     /// bytes held in memory, the decoded planes, each decompressed block and the blocks
     /// in flight together. Checked before each such allocation. The default,
     /// [`Limits::DEFAULT_MAX_MEMORY_BYTES`], is half the 24 GiB of the machines the
-    /// project is built on, and holds an image at the default pixel limit together with
-    /// the working set of [`operator::map`](crate::operator::map) (about 36 bytes per
-    /// pixel).
+    /// project is built on, and holds an image at the default pixel limit (2^28 pixels)
+    /// together with the working set of `visadapt map` (measured 13-16 bytes per pixel
+    /// with [`operator::map_owned`](crate::operator::map_owned), about 4 GiB at the
+    /// limit; [`operator::map`](crate::operator::map), which keeps its input, needs 12
+    /// more).
     pub max_memory_bytes: u64,
 }
 

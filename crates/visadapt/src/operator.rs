@@ -372,6 +372,18 @@ pub struct PixelStats {
     pub saturated: usize,
 }
 
+impl PixelStats {
+    /// The counts of both.
+    fn add(self, other: PixelStats) -> PixelStats {
+        PixelStats {
+            non_finite: self.non_finite + other.non_finite,
+            negative: self.negative + other.negative,
+            clipped: self.clipped + other.clipped,
+            saturated: self.saturated + other.saturated,
+        }
+    }
+}
+
 /// Largest display-relative value (1 = `L_dmax`) a pixel may have before the blur: pixels
 /// beyond it are scaled down to it, chromaticity kept (counted in
 /// [`PixelStats::saturated`]). Our bound: 1e30 leaves 3e8 of headroom below `f32::MAX`
@@ -420,6 +432,30 @@ pub fn map(image: &HdrImage, conditions: &ViewingConditions) -> Result<Output> {
             (out, stats)
         }
     };
+    Ok(Output {
+        image: display,
+        report,
+        stats,
+    })
+}
+
+/// [`map`], consuming the image: the display planes are written over its X, Y, Z planes
+/// ([`apply_owned`]), so that the working set is one image instead of two (12 bytes per
+/// pixel, 16 with a scotopic plane, instead of 24–28; see the README's "Limits and
+/// safety"). The result is the same as [`map`]'s, bit for bit. With
+/// [`AdaptationMode::Local`] it is [`map`] (every pixel's mapping reads the adaptation map
+/// of the whole scene).
+pub fn map_owned(image: HdrImage, conditions: &ViewingConditions) -> Result<Output> {
+    if conditions.adaptation != AdaptationMode::Global {
+        return map(&image, conditions);
+    }
+    let (scene, report) = prepare(&image, conditions)?;
+    // The glare stage makes a new image: the input can go before the mapping.
+    let scene = match scene {
+        Cow::Owned(retina) => retina,
+        Cow::Borrowed(_) => image,
+    };
+    let (display, stats) = apply_owned(scene, &report.mapping);
     Ok(Output {
         image: display,
         report,
@@ -720,18 +756,94 @@ pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -
     let DisplayImage { r, g, b, .. } = out;
     let blur = mapping.blur_sigma_px > 0.0;
     // Without a blur the clipping is done in the same pass (one trip through memory).
-    let mut stats = par_chunks(r, g, b, |start, r, g, b| {
-        let mut s = map_chunk(image, &c, start, r, g, b);
+    let stats = par_chunks(r, g, b, |start, r, g, b| {
+        let end = start + r.len();
+        let scotopic = image.scotopic.as_ref().map(|s| &s[start..end]);
+        let xyz = [
+            &image.x[start..end],
+            &image.y[start..end],
+            &image.z[start..end],
+        ];
+        let mut s = map_chunk(&c, xyz, scotopic, r, g, b);
         if !blur {
             s.clipped = clip_chunk(r, g, b).clipped;
         }
         s
     });
-    if blur {
+    blur_and_clip(stats, r, g, b, image.width, image.height, mapping)
+}
+
+/// [`apply`], consuming the image: each piece of the X, Y, Z planes is mapped through a
+/// small buffer and written back over itself as R, G, B, so no second set of planes is
+/// allocated. Same result as [`apply`], bit for bit.
+///
+/// # Panics
+/// As [`apply`].
+pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelStats) {
+    let c = Coefficients::new(mapping);
+    let HdrImage {
+        width,
+        height,
+        x: mut r,
+        y: mut g,
+        z: mut b,
+        scotopic,
+        ..
+    } = image;
+    assert!(r.len() == width * height && g.len() == r.len() && b.len() == r.len());
+    let blur = mapping.blur_sigma_px > 0.0;
+    let stats = par_chunks(&mut r, &mut g, &mut b, |start, r, g, b| {
+        let end = start + r.len();
+        let s = scotopic.as_ref().map(|s| &s[start..end]);
+        // Pieces of a few KiB, through a buffer on the stack (in the L1 cache).
+        const PIECE: usize = 1024;
+        let mut stats = PixelStats::default();
+        let mut buffer = [[0.0f32; PIECE]; 3];
+        for lo in (0..r.len()).step_by(PIECE) {
+            let hi = (lo + PIECE).min(r.len());
+            let [or, og, ob] = &mut buffer;
+            let (or, og, ob) = (&mut or[..hi - lo], &mut og[..hi - lo], &mut ob[..hi - lo]);
+            let xyz = [&r[lo..hi], &g[lo..hi], &b[lo..hi]];
+            let piece = map_chunk(&c, xyz, s.map(|s| &s[lo..hi]), or, og, ob);
+            stats = stats.add(piece);
+            r[lo..hi].copy_from_slice(or);
+            g[lo..hi].copy_from_slice(og);
+            b[lo..hi].copy_from_slice(ob);
+        }
+        if !blur {
+            stats.clipped = clip_chunk(r, g, b).clipped;
+        }
+        stats
+    });
+    drop(scotopic);
+    let stats = blur_and_clip(stats, &mut r, &mut g, &mut b, width, height, mapping);
+    let display = DisplayImage {
+        width,
+        height,
+        r,
+        g,
+        b,
+        display_max_cd_m2: mapping.display_max_cd_m2 as f32,
+    };
+    (display, stats)
+}
+
+/// The stages after the per-pixel mapping: the acuity blur and the clipping after it
+/// (without a blur the clipping was done in the mapping's pass).
+fn blur_and_clip(
+    mut stats: PixelStats,
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+    width: usize,
+    height: usize,
+    mapping: &Mapping,
+) -> PixelStats {
+    if mapping.blur_sigma_px > 0.0 {
         crate::blur::gaussian_blur_planes(
-            &mut [r.as_mut_slice(), g.as_mut_slice(), b.as_mut_slice()],
-            image.width,
-            image.height,
+            &mut [r, g, b],
+            width,
+            height,
             mapping.blur_sigma_px as f32,
         );
         stats.clipped = par_chunks(r, g, b, |_, r, g, b| clip_chunk(r, g, b)).clipped;
@@ -748,12 +860,7 @@ pub(crate) fn par_chunks(
     b: &mut [f32],
     f: impl Fn(usize, &mut [f32], &mut [f32], &mut [f32]) -> PixelStats + Sync,
 ) -> PixelStats {
-    let add = |a: PixelStats, b: PixelStats| PixelStats {
-        non_finite: a.non_finite + b.non_finite,
-        negative: a.negative + b.negative,
-        clipped: a.clipped + b.clipped,
-        saturated: a.saturated + b.saturated,
-    };
+    let add = PixelStats::add;
     #[cfg(feature = "rayon")]
     {
         use rayon::prelude::*;
@@ -777,26 +884,20 @@ pub(crate) fn par_chunks(
 
 #[inline(always)]
 fn map_chunk(
-    image: &HdrImage,
     c: &Coefficients,
-    start: usize,
+    [xs, ys, zs]: [&[f32]; 3],
+    scotopic: Option<&[f32]>,
     r: &mut [f32],
     g: &mut [f32],
     b: &mut [f32],
 ) -> PixelStats {
-    let end = start + r.len();
-    let (xs, ys, zs) = (
-        &image.x[start..end],
-        &image.y[start..end],
-        &image.z[start..end],
-    );
     let (mut non_finite, mut negative, mut saturated) = (0u32, 0u32, 0u32);
     // Two copies of one branch-free loop (file scotopic channel, or the XYZ estimate), so
     // that the compiler vectorises each.
     let out = r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut());
-    match &image.scotopic {
+    match scotopic {
         Some(s) => {
-            let xyzs = xs.iter().zip(ys).zip(zs).zip(&s[start..end]);
+            let xyzs = xs.iter().zip(ys).zip(zs).zip(s);
             for ((((x, y), z), s), ((r, g), b)) in xyzs.zip(out) {
                 let (finite, neg, v) = sanitize([*x, *y, *z, *s]);
                 let (sat, [x, y, z, s]) = c.saturate(v);

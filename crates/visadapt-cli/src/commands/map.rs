@@ -120,8 +120,9 @@ fn map_file(
     super::warn_if_default_view(input, &image, &conditions);
 
     step(format!("applying the model to {}", input.display()));
-    let out = operator::map(&image, &conditions).with_context(|| input.display().to_string())?;
-    drop(image);
+    // The input's planes become the display's (one image in memory, not two).
+    let out =
+        operator::map_owned(image, &conditions).with_context(|| input.display().to_string())?;
     let stats = out.stats;
     if stats.non_finite > 0 {
         log::warn!(
@@ -287,6 +288,8 @@ fn output_format(args: &MapArgs) -> anyhow::Result<OutputFormat> {
         Some(FormatArg::Png) => OutputFormat::Png { bits: 8 },
         Some(FormatArg::Jpeg) => OutputFormat::Jpeg { quality: 90 },
         Some(FormatArg::Exr) => OutputFormat::Exr,
+        Some(FormatArg::Tiff) => OutputFormat::Tiff,
+        Some(FormatArg::Hdr) => OutputFormat::Radiance,
         None => OutputFormat::from_path(&args.output)?,
     };
     Ok(match format {

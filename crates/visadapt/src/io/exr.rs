@@ -1094,12 +1094,12 @@ struct LayerMeta<'a> {
     view: Option<&'a crate::View>,
 }
 
-/// Write one layer of f32 channels `(name, samples)`, RLE, in blocks chosen by
-/// [`BlockLayout::for_image`].
+/// Write one layer of f32 channels `(name, samples)` (one, three or four), RLE, in blocks
+/// chosen by [`BlockLayout::for_image`]. The samples are read where they are, not copied.
 fn write_layer(
     width: usize,
     height: usize,
-    channels: Vec<(&'static str, Vec<f32>)>,
+    channels: &[(&'static str, &[f32])],
     meta: LayerMeta<'_>,
     w: impl std::io::Write + std::io::Seek,
 ) -> Result<()> {
@@ -1110,10 +1110,6 @@ fn write_layer(
         adopted_neutral,
         view,
     } = meta;
-    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
-        .into_iter()
-        .map(|(name, samples)| AnyChannel::new(name, FlatSamples::F32(samples)))
-        .collect();
     let mut attributes = LayerAttributes {
         white_luminance,
         adopted_neutral: adopted_neutral.map(|[x, y]| Vec2(x as f32, y as f32)),
@@ -1125,7 +1121,7 @@ fn write_layer(
             AttributeValue::Text(Text::new_or_panic(super::radiance::view_options(v))),
         );
     }
-    let blocks = match BlockLayout::for_image(width, height, 4 * list.len()) {
+    let blocks = match BlockLayout::for_image(width, height, 4 * channels.len()) {
         BlockLayout::ScanLines => Blocks::ScanLines,
         BlockLayout::Tiles {
             width: tw,
@@ -1137,22 +1133,55 @@ fn write_layer(
         blocks,
         line_order: LineOrder::Increasing,
     };
-    let layer = Layer::new(
-        (width, height),
-        attributes,
-        encoding,
-        AnyChannels::sort(list),
-    );
-    let mut image = Image::from_layer(layer);
-    image.attributes.chromaticities = chromaticities;
-    image.write().to_unbuffered(w).map_err(|e| match e {
+    let result = {
+        // The same steps for each number of channels (each a different pixel type).
+        macro_rules! write_with {
+            ($channels:expr) => {{
+                let layer = Layer::new((width, height), attributes, encoding, $channels);
+                let mut image = Image::from_layer(layer);
+                image.attributes.chromaticities = chromaticities;
+                image.write().to_unbuffered(w)
+            }};
+        }
+        let at = |p: &Vec2<usize>| p.1 * width + p.0;
+        match *channels {
+            [(n0, p0)] => write_with!(
+                SpecificChannels::build()
+                    .with_channel(n0)
+                    .with_pixel_fn(|p| (p0[at(&p)],))
+            ),
+            [(n0, p0), (n1, p1), (n2, p2)] => write_with!(
+                SpecificChannels::build()
+                    .with_channel(n0)
+                    .with_channel(n1)
+                    .with_channel(n2)
+                    .with_pixel_fn(|p| {
+                        let i = at(&p);
+                        (p0[i], p1[i], p2[i])
+                    })
+            ),
+            [(n0, p0), (n1, p1), (n2, p2), (n3, p3)] => write_with!(
+                SpecificChannels::build()
+                    .with_channel(n0)
+                    .with_channel(n1)
+                    .with_channel(n2)
+                    .with_channel(n3)
+                    .with_pixel_fn(|p| {
+                        let i = at(&p);
+                        (p0[i], p1[i], p2[i], p3[i])
+                    })
+            ),
+            _ => unreachable!("the writers pass one, three or four channels"),
+        }
+    };
+    result.map_err(|e| match e {
         exr::error::Error::Io(io) => crate::Error::Io(io),
         other => crate::Error::Unsupported(format!("OpenEXR writer: {other}")),
     })
 }
 
 /// Check that `planes` each hold `width × height` samples and the size is non-zero.
-fn check_planes(width: usize, height: usize, planes: &[&Vec<f32>]) -> Result<()> {
+fn check_planes(width: usize, height: usize, planes: &[&[f32]]) -> Result<()> {
     let n = width.checked_mul(height).unwrap_or(0);
     if n == 0 || planes.iter().any(|p| p.len() != n) {
         return Err(Error::invalid(
@@ -1180,11 +1209,7 @@ pub fn write_display(image: &DisplayImage, w: impl std::io::Write + std::io::See
     write_layer(
         image.width,
         image.height,
-        vec![
-            ("R", image.r.clone()),
-            ("G", image.g.clone()),
-            ("B", image.b.clone()),
-        ],
+        &[("R", &image.r), ("G", &image.g), ("B", &image.b)],
         LayerMeta {
             white_luminance: Some(l),
             chromaticities: Some(rec709_attribute()),
@@ -1200,23 +1225,19 @@ pub fn write_display(image: &DisplayImage, w: impl std::io::Write + std::io::See
 /// [`VIEW_ATTRIBUTE`]. [`decode`] reads it back as an absolute image with the same adopted
 /// white and view.
 pub fn write_hdr(image: &HdrImage, w: impl std::io::Write + std::io::Seek) -> Result<()> {
-    let mut planes = vec![&image.x, &image.y, &image.z];
+    let mut planes: Vec<&[f32]> = vec![&image.x, &image.y, &image.z];
     if let Some(s) = &image.scotopic {
         planes.push(s);
     }
     check_planes(image.width, image.height, &planes)?;
-    let mut channels = vec![
-        ("X", image.x.clone()),
-        ("Y", image.y.clone()),
-        ("Z", image.z.clone()),
-    ];
+    let mut channels: Vec<(&str, &[f32])> = vec![("X", &image.x), ("Y", &image.y), ("Z", &image.z)];
     if let Some(s) = &image.scotopic {
-        channels.push(("scotopic", s.clone()));
+        channels.push(("scotopic", s));
     }
     write_layer(
         image.width,
         image.height,
-        channels,
+        &channels,
         LayerMeta {
             // E is what the layout means without the attribute.
             adopted_neutral: image.adopted_white.filter(|w| *w != colour::EQUAL_ENERGY),
@@ -1236,12 +1257,11 @@ pub fn write_luminance(
     y: &[f32],
     w: impl std::io::Write + std::io::Seek,
 ) -> Result<()> {
-    let plane = y.to_vec();
-    check_planes(width, height, &[&plane])?;
+    check_planes(width, height, &[y])?;
     write_layer(
         width,
         height,
-        vec![("Y", plane)],
+        &[("Y", y)],
         LayerMeta {
             white_luminance: Some(1.0),
             ..LayerMeta::default()
@@ -1259,9 +1279,8 @@ pub fn write_plane(
     values: &[f32],
     w: impl std::io::Write + std::io::Seek,
 ) -> Result<()> {
-    let plane = values.to_vec();
-    check_planes(width, height, &[&plane])?;
-    write_layer(width, height, vec![("Y", plane)], LayerMeta::default(), w)
+    check_planes(width, height, &[values])?;
+    write_layer(width, height, &[("Y", values)], LayerMeta::default(), w)
 }
 
 #[cfg(test)]

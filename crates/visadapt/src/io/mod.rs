@@ -1,5 +1,7 @@
 //! Reading HDR images (Radiance `.hdr`/`.pic`, OpenEXR, PFM) into an [`HdrImage`] in
-//! absolute units, and writing display images (PNG, JPEG, EXR).
+//! absolute units, and display-encoded photographs (8/16-bit PNG, JPEG, TIFF: [`ldr`]) in
+//! relative units; writing display images (PNG, JPEG, OpenEXR, 32-bit float TIFF,
+//! Radiance).
 //!
 //! The input format is detected from the file's first bytes, not its name.
 
@@ -8,9 +10,11 @@ use std::path::Path;
 
 pub mod display;
 pub mod exr;
+pub mod ldr;
 pub mod output;
 pub mod pfm;
 pub mod radiance;
+pub mod tiff;
 
 /// The input formats the library reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -21,6 +25,12 @@ pub enum InputFormat {
     OpenExr,
     /// Portable float map (`PF` colour, `Pf` grey).
     Pfm,
+    /// PNG (magic `89 50 4e 47`), 8 or 16 bits, sRGB-encoded ([`ldr`]).
+    Png,
+    /// JPEG (magic `ff d8 ff`), sRGB-encoded ([`ldr`]).
+    Jpeg,
+    /// TIFF (`II*\0` or `MM\0*`), 8/16-bit sRGB-encoded or 32-bit float ([`ldr`]).
+    Tiff,
 }
 
 /// Guess the format from the first bytes of a file.
@@ -29,6 +39,12 @@ pub fn detect(head: &[u8]) -> Option<InputFormat> {
         Some(InputFormat::OpenExr)
     } else if head.starts_with(b"PF") || head.starts_with(b"Pf") {
         Some(InputFormat::Pfm)
+    } else if head.starts_with(b"\x89PNG\r\n\x1a\n") {
+        Some(InputFormat::Png)
+    } else if head.starts_with(&[0xff, 0xd8, 0xff]) {
+        Some(InputFormat::Jpeg)
+    } else if head.starts_with(b"II*\0") || head.starts_with(b"MM\0*") {
+        Some(InputFormat::Tiff)
     } else if head.starts_with(b"#?") || radiance::looks_like_header(head) {
         Some(InputFormat::Radiance)
     } else {
@@ -131,6 +147,8 @@ fn read_bytes_from(
         InputFormat::Radiance => radiance::file_len_bound(bytes),
         InputFormat::OpenExr => exr::file_len_bound(bytes),
         InputFormat::Pfm => pfm::file_len(bytes),
+        // Compressed without a stated length: the whole file, within the budget.
+        InputFormat::Png | InputFormat::Jpeg | InputFormat::Tiff => Some(u64::MAX),
     };
     let bound = bound.ok_or_else(|| {
         Error::decode(
@@ -167,6 +185,9 @@ fn format_name(f: InputFormat) -> &'static str {
         InputFormat::Radiance => "Radiance",
         InputFormat::OpenExr => "OpenEXR",
         InputFormat::Pfm => "PFM",
+        InputFormat::Png => "PNG",
+        InputFormat::Jpeg => "JPEG",
+        InputFormat::Tiff => "TIFF",
     }
 }
 
@@ -175,7 +196,10 @@ fn unrecognised(bytes: &[u8]) -> Error {
     if bytes.is_empty() {
         return Error::decode("image", "empty file");
     }
-    Error::Unsupported("not a Radiance, OpenEXR or PFM file (unrecognised first bytes)".into())
+    Error::Unsupported(
+        "not a Radiance, OpenEXR or PFM file, nor a PNG, JPEG or TIFF photograph (unrecognised first bytes)"
+            .into(),
+    )
 }
 
 /// The error for an allocation the system refused although it was within the budget.
@@ -195,6 +219,9 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
         Some(InputFormat::Radiance) => radiance::decode(bytes, limits),
         Some(InputFormat::OpenExr) => exr::decode(bytes, limits),
         Some(InputFormat::Pfm) => pfm::decode(bytes, limits),
+        Some(InputFormat::Png) => ldr::decode_png(bytes, limits),
+        Some(InputFormat::Jpeg) => ldr::decode_jpeg(bytes, limits),
+        Some(InputFormat::Tiff) => ldr::decode_tiff(bytes, limits),
         None => Err(unrecognised(bytes)),
     }
 }
@@ -215,11 +242,17 @@ pub enum OutputFormat {
     /// OpenEXR, display-referred linear Rec.709 RGB (1.0 = `L_dmax`, recorded in the
     /// `whiteLuminance` attribute).
     Exr,
+    /// TIFF, display-referred linear Rec. 709 RGB as 32-bit floats (1.0 = `L_dmax`, stated
+    /// in the `ImageDescription`; [`tiff::write_display`]).
+    Tiff,
+    /// Radiance RGBE, display-referred linear Rec. 709 RGB with `EXPOSURE=` such that
+    /// readers give RGB (1, 1, 1) `L_dmax` cd/m² ([`radiance::write_display`]).
+    Radiance,
 }
 
 impl OutputFormat {
-    /// The format implied by a file name's extension (`.png`, `.jpg`/`.jpeg`, `.exr`),
-    /// with 8-bit PNG and quality-90 JPEG.
+    /// The format implied by a file name's extension (`.png`, `.jpg`/`.jpeg`, `.exr`,
+    /// `.tif`/`.tiff`, `.hdr`), with 8-bit PNG and quality-90 JPEG.
     pub fn from_path(path: &Path) -> Result<Self> {
         let ext = path
             .extension()
@@ -229,8 +262,10 @@ impl OutputFormat {
             Some("png") => Ok(OutputFormat::Png { bits: 8 }),
             Some("jpg" | "jpeg") => Ok(OutputFormat::Jpeg { quality: 90 }),
             Some("exr") => Ok(OutputFormat::Exr),
+            Some("tif" | "tiff") => Ok(OutputFormat::Tiff),
+            Some("hdr") => Ok(OutputFormat::Radiance),
             _ => Err(Error::Unsupported(format!(
-                "cannot tell the output format of {} (use .png, .jpg or .exr)",
+                "cannot tell the output format of {} (use .png, .jpg, .exr, .tif or .hdr)",
                 path.display()
             ))),
         }
@@ -260,6 +295,8 @@ pub fn write_display_to(
         OutputFormat::Png { bits } => display::write_png(image, bits, &mut buf)?,
         OutputFormat::Jpeg { quality } => display::write_jpeg(image, quality, &mut buf)?,
         OutputFormat::Exr => exr::write_display(image, &mut buf)?,
+        OutputFormat::Tiff => tiff::write_display(image, &mut buf)?,
+        OutputFormat::Radiance => radiance::write_display(image, &mut buf)?,
     }
     w.write_all(buf.get_ref())?;
     w.flush()?;
@@ -273,5 +310,7 @@ pub fn write_display(image: &DisplayImage, path: &Path, format: OutputFormat) ->
         OutputFormat::Png { bits } => display::write_png(image, bits, w),
         OutputFormat::Jpeg { quality } => display::write_jpeg(image, quality, w),
         OutputFormat::Exr => exr::write_display(image, w),
+        OutputFormat::Tiff => tiff::write_display(image, w),
+        OutputFormat::Radiance => radiance::write_display(image, w),
     })
 }

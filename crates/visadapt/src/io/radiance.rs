@@ -1,4 +1,5 @@
-//! Reader for Radiance pictures (`.hdr`, `.pic`): 32-bit RGBE and XYZE, in absolute units.
+//! Reader for Radiance pictures (`.hdr`, `.pic`): 32-bit RGBE and XYZE, in absolute units;
+//! and a writer of display images as RGBE ([`write_display`]).
 //!
 //! A Radiance picture is a text header, a resolution line and the scanlines
 //! (Radiance reference: `src/common/header.c`, `resolu.c`, `color.c` of the Radiance
@@ -797,6 +798,124 @@ impl Converter {
             v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
         })
     }
+}
+
+/// Write a display image as a Radiance RGBE picture: the linear Rec. 709 values of the
+/// display image with `PRIMARIES=` Rec. 709 and `EXPOSURE=` 179 / `display_max_cd_m2`, so
+/// that a Radiance reader (this one, `pvalue`, `ximage`) gives RGB (1, 1, 1) the display
+/// maximum in cd/m² (the units of the module documentation), as the OpenEXR output does.
+/// Scanlines are new-style run-length records for widths of 8 to 32767 (Radiance's
+/// `fwritecolrs` range), flat pixels otherwise; a flat pixel that would read as a repeat
+/// record (`1 1 1 n`) or a run-length start is moved by one step of its blue or green
+/// mantissa.
+///
+/// ```
+/// use visadapt::{DisplayImage, Limits, io};
+/// let image = DisplayImage { width: 9, height: 2, r: vec![1.0; 18], g: vec![1.0; 18],
+///                            b: vec![1.0; 18], display_max_cd_m2: 100.0 };
+/// let mut hdr = Vec::new();
+/// io::radiance::write_display(&image, &mut hdr)?;
+/// let back = io::decode(&hdr, &Limits::default())?;
+/// assert!((back.y[0] - 100.0).abs() < 0.5);
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn write_display(image: &crate::DisplayImage, mut w: impl std::io::Write) -> Result<()> {
+    use std::io::Write;
+    let (width, height) = (image.width, image.height);
+    let n = width * height;
+    if [&image.r, &image.g, &image.b].iter().any(|p| p.len() != n) {
+        return Err(Error::invalid(
+            "image",
+            format!("{width}x{height}"),
+            "its planes do not have width x height samples",
+        ));
+    }
+    let l = image.display_max_cd_m2;
+    if !(l.is_finite() && l > 0.0) {
+        return Err(Error::invalid(
+            "display-max",
+            l,
+            "must be a positive, finite luminance in cd/m²",
+        ));
+    }
+    let p = colour::REC709;
+    let header = format!(
+        "#?RADIANCE\n\
+         # visadapt display-referred linear Rec. 709 RGB; 1.0 = {l} cd/m2\n\
+         SOFTWARE=visadapt {}\n\
+         FORMAT=32-bit_rle_rgbe\n\
+         PRIMARIES={} {} {} {} {} {} {} {}\n\
+         EXPOSURE={}\n\
+         \n\
+         -Y {height} +X {width}\n",
+        env!("CARGO_PKG_VERSION"),
+        p.red[0],
+        p.red[1],
+        p.green[0],
+        p.green[1],
+        p.blue[0],
+        p.blue[1],
+        p.white[0],
+        p.white[1],
+        WHITE_EFFICACY / f64::from(l),
+    );
+    let mut out = std::io::BufWriter::new(&mut w);
+    out.write_all(header.as_bytes())?;
+    let run_length = (8..=32767).contains(&width);
+    let mut row = vec![[0u8; 4]; width];
+    let mut bytes = Vec::with_capacity(4 * width + 4 * width.div_ceil(128) + 4);
+    for y in 0..height {
+        for (x, px) in row.iter_mut().enumerate() {
+            let i = y * width + x;
+            *px = rgbe([image.r[i], image.g[i], image.b[i]]);
+        }
+        bytes.clear();
+        if run_length {
+            bytes.extend_from_slice(&[2, 2, (width >> 8) as u8, (width & 0xff) as u8]);
+            // Each component in literal records of at most 128 bytes.
+            for c in 0..4 {
+                for chunk in row.chunks(128) {
+                    bytes.push(chunk.len() as u8);
+                    bytes.extend(chunk.iter().map(|px| px[c]));
+                }
+            }
+        } else {
+            for (x, px) in row.iter_mut().enumerate() {
+                if px[..3] == [1, 1, 1] {
+                    px[2] = 2;
+                }
+                if x == 0 && px[0] == 2 && px[1] == 2 && px[2] < 128 {
+                    px[1] = 3;
+                }
+                bytes.extend_from_slice(px);
+            }
+        }
+        out.write_all(&bytes)?;
+    }
+    out.flush()?;
+    Ok(())
+}
+
+/// One RGBE pixel (`color.c`, `setcolr`): the largest component's binary exponent, the
+/// three mantissas over 256; non-finite and negative values are written as 0.
+fn rgbe(rgb: [f32; 3]) -> [u8; 4] {
+    let c = rgb.map(|v| {
+        if v.is_finite() && v > 0.0 {
+            v as f64
+        } else {
+            0.0
+        }
+    });
+    let v = c[0].max(c[1]).max(c[2]);
+    if v < 1e-32 {
+        return [0; 4];
+    }
+    // v = m · 2^e with m in [0.5, 1).
+    let e = v.log2().floor() as i32 + 1;
+    let e = e.clamp(-128, 127);
+    let scale = 256.0 / 2f64.powi(e);
+    let m = c.map(|x| (x * scale).min(255.0) as u8);
+    [m[0], m[1], m[2], (e + 128) as u8]
 }
 
 #[cfg(test)]
