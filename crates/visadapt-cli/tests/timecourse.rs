@@ -610,3 +610,59 @@ fn timecourse_to_darkness_reproduces_figure_10() {
         assert!(f(row, "photopic_scale").is_finite());
     }
 }
+
+#[test]
+fn video_pipeline_writes_the_same_bytes_as_one_frame_after_another() {
+    // Frames that move the adaptation (bright, dim, bright), with the acuity blur on: each
+    // PNG must be byte for byte what the library gives frame by frame, in order.
+    let dir = tempfile::tempdir().unwrap();
+    let peaks = [500.0, 500.0, 0.05, 0.05, 0.05, 200.0, 200.0, 3.0];
+    for (n, peak) in peaks.iter().enumerate() {
+        write_exr(&dir.path().join(format!("s{n}.exr")), &scene(40, 24, *peak));
+    }
+    let outdir = dir.path().join("out");
+    visadapt()
+        .arg("video")
+        .arg(dir.path().join("s%d.exr"))
+        .args(["--fps", "2", "--fov", "30", "-o"])
+        .arg(&outdir)
+        .assert()
+        .success();
+    let mut eye: Option<visadapt::timecourse::Adaptation> = None;
+    let mut display = visadapt::DisplayImage::default();
+    for (n, peak) in peaks.iter().enumerate() {
+        let hdr = scene(40, 24, *peak);
+        let conditions = visadapt::operator::ViewingConditions {
+            view: Some(visadapt::View::perspective(30.0, 40, 24)),
+            ..Default::default()
+        };
+        let (scene, report) = visadapt::operator::prepare(&hdr, &conditions).unwrap();
+        let state = match eye.as_mut() {
+            None => eye.insert(
+                visadapt::timecourse::Adaptation::adapted(
+                    report.world_adaptation_cd_m2,
+                    report.world_adaptation_scotopic_cd_m2,
+                )
+                .unwrap(),
+            ),
+            Some(s) => {
+                s.step_to(0.5, &report).unwrap();
+                s
+            }
+        };
+        visadapt::operator::apply_state_into(&scene, &report, state, &conditions, &mut display)
+            .unwrap();
+        let expected = dir.path().join(format!("expected{n}.png"));
+        visadapt::io::write_display(
+            &display,
+            &expected,
+            visadapt::io::OutputFormat::Png { bits: 8 },
+        )
+        .unwrap();
+        assert_eq!(
+            std::fs::read(outdir.join(format!("s{n}.png"))).unwrap(),
+            std::fs::read(&expected).unwrap(),
+            "frame {n}"
+        );
+    }
+}

@@ -10,14 +10,21 @@
 //! for every later frame the adaptation state is stepped by `1/fps` to that frame's world
 //! adaptation (Sec. 4.4: half its highest visible luminance, photopic and scotopic), and
 //! the frame is mapped with the state's Eq. 8–9 mapping. Each output frame is written,
-//! atomically, as soon as it is done, to `OUT_DIR/<input stem>.<format>`. One HDR frame,
-//! one display image and the file buffer are reused, so memory does not grow with the
-//! number of frames. On an error, the frames already written stay.
+//! atomically, as soon as it is done, to `OUT_DIR/<input stem>.<format>`.
+//!
+//! The work is a pipeline of three threads joined by bounded queues: a reader decodes
+//! frame n+1 while the operator maps frame n and a writer encodes and writes frame n−1.
+//! The operator is one thread, so the state is stepped in frame order; the output is the
+//! same, byte for byte, as doing one frame after another. HDR frames, display images and
+//! the file buffer go round and are reused, so memory does not grow with the number of
+//! frames (at most three of each exist at once). On an error, the frames before it are
+//! written, nothing after it is, and the error names its frame.
 
 use crate::cli::{VideoArgs, VideoFormat};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
+use std::sync::mpsc;
 use visadapt::io::{self, OutputFormat};
 use visadapt::operator::{self, ViewingConditions};
 use visadapt::timecourse::Adaptation;
@@ -174,15 +181,124 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     let progress = ProgressBar::new(frames.len() as u64).with_style(
         ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}").expect("valid template"),
     );
+    // Three stages overlap: the reader decodes frame n+1 while the operator maps frame n and
+    // the writer encodes frame n-1. The operator stays one thread, in frame order, because
+    // the adaptation state is stepped from each frame to the next.
+    let (to_operator, decoded) = mpsc::sync_channel::<anyhow::Result<HdrImage>>(QUEUE);
+    let (free_hdr, reused_hdr) = mpsc::channel::<HdrImage>();
+    let (to_writer, mapped) = mpsc::sync_channel::<Mapped>(QUEUE);
+    let (free_display, reused_display) = mpsc::channel::<DisplayImage>();
+    std::thread::scope(|s| {
+        let frames = &frames;
+        s.spawn(move || read_frames(frames, &limits, &to_operator, &reused_hdr));
+        let writer = s.spawn({
+            let progress = progress.clone();
+            move || write_frames(&mapped, &free_display, format, &progress)
+        });
+        let operated = map_frames(
+            &args,
+            &conditions,
+            frames,
+            dt,
+            &out_path,
+            (&decoded, &free_hdr),
+            (&to_writer, &reused_display),
+        );
+        // No more frames for the writer: it finishes those it has, then ends.
+        drop(to_writer);
+        drop(decoded);
+        let written = writer.join().expect("the writer thread does not panic");
+        // The writer's error is for an earlier frame than the operator's (a frame reaches
+        // the writer only after the operator is done with it): report the first one.
+        written.and(operated)
+    })?;
+    progress.finish_and_clear();
+    if !args.json {
+        println!("wrote {} frames to {}", frames.len(), args.output.display());
+    }
+    Ok(())
+}
+
+/// Frames each queue between two stages holds: with the frame a stage works on, at most
+/// three decoded frames and three display images exist at once, whatever the length of the
+/// video.
+const QUEUE: usize = 1;
+
+/// A mapped frame on its way to the writer.
+struct Mapped {
+    display: DisplayImage,
+    path: PathBuf,
+    /// The frame's JSON line, printed once the file is written (`--json`).
+    json: Option<String>,
+}
+
+/// The reader: decode every frame in order, into images the operator hands back, and pass
+/// each on (or the first error, naming the frame, then stop). Ends early when the
+/// operator stops listening.
+fn read_frames(
+    frames: &[(u64, PathBuf)],
+    limits: &visadapt::Limits,
+    to_operator: &mpsc::SyncSender<anyhow::Result<HdrImage>>,
+    reused: &mpsc::Receiver<HdrImage>,
+) {
     let mut bytes = Vec::new();
-    let mut hdr = HdrImage::zeros(0, 0);
-    let mut display = DisplayImage::default();
+    for (n, input) in frames {
+        let mut hdr = reused.try_recv().unwrap_or_else(|_| HdrImage::zeros(0, 0));
+        let read = io::read_into(input, limits, &mut bytes, &mut hdr)
+            .with_context(|| format!("frame {n} ({})", input.display()));
+        let failed = read.is_err();
+        if to_operator.send(read.map(|()| hdr)).is_err() || failed {
+            return;
+        }
+    }
+}
+
+/// The writer: write every mapped frame, atomically and in order, then hand its image back
+/// to the operator. Stops at the first error (the operator then stops too, as its next
+/// frame finds no writer).
+fn write_frames(
+    mapped: &mpsc::Receiver<Mapped>,
+    free: &mpsc::Sender<DisplayImage>,
+    format: OutputFormat,
+    progress: &ProgressBar,
+) -> anyhow::Result<()> {
+    for frame in mapped {
+        io::write_display(&frame.display, &frame.path, format)
+            .with_context(|| frame.path.display().to_string())?;
+        if let Some(line) = frame.json {
+            println!("{line}");
+        }
+        progress.inc(1);
+        // The operator may have finished: the image is then simply dropped.
+        let _ = free.send(frame.display);
+    }
+    Ok(())
+}
+
+/// The operator, on the calling thread: each decoded frame in order through the time
+/// course (Sec. 4.4) and the mapping, into a reused display image for the writer.
+fn map_frames(
+    args: &VideoArgs,
+    conditions: &ViewingConditions,
+    frames: &[(u64, PathBuf)],
+    dt: f64,
+    out_path: &dyn Fn(&Path) -> PathBuf,
+    (decoded, free_hdr): (
+        &mpsc::Receiver<anyhow::Result<HdrImage>>,
+        &mpsc::Sender<HdrImage>,
+    ),
+    (to_writer, reused): (&mpsc::SyncSender<Mapped>, &mpsc::Receiver<DisplayImage>),
+) -> anyhow::Result<()> {
     let mut eye: Option<Adaptation> = None;
     let mut size = None;
     let mut warned_units = false;
     for (k, (n, input)) in frames.iter().enumerate() {
         let what = || format!("frame {n} ({})", input.display());
-        io::read_into(input, &limits, &mut bytes, &mut hdr).with_context(what)?;
+        // The reader ends only after sending every frame or an error.
+        let Ok(hdr) = decoded.recv() else {
+            return Ok(());
+        };
+        let mut hdr = hdr?;
         match size {
             None => size = Some((hdr.width, hdr.height)),
             Some((w, h)) if (w, h) != (hdr.width, hdr.height) => {
@@ -227,16 +343,18 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
                 state
             }
         };
+        let mut display = reused.try_recv().unwrap_or_default();
         let (mapping, _) =
             operator::apply_state_into(&scene, &report, state, &conditions, &mut display)
                 .with_context(what)?;
         drop(scene);
+        // Back to the reader for a later frame (if it has finished, the image is dropped).
+        let _ = free_hdr.send(hdr);
         let out = out_path(input);
-        io::write_display(&display, &out, format).with_context(|| out.display().to_string())?;
-        if args.json {
+        let json = args.json.then(|| {
             let offset =
                 mapping.photopic_offset_cd_m2 + mapping.rod_weight * mapping.scotopic_offset_cd_m2;
-            let line = serde_json::json!({
+            serde_json::json!({
                 "frame": n,
                 "t_seconds": k as f64 * dt,
                 "input": input.display().to_string(),
@@ -251,14 +369,18 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
                 "offset_cd_m2": offset,
                 "acuity_cycles_per_degree": state.acuity_cycles_per_degree(),
                 "glare": visadapt::report::glare_json(&report),
-            });
-            println!("{line}");
+            })
+            .to_string()
+        });
+        let frame = Mapped {
+            display,
+            path: out,
+            json,
+        };
+        if to_writer.send(frame).is_err() {
+            // The writer stopped at an error, which it reports.
+            return Ok(());
         }
-        progress.inc(1);
-    }
-    progress.finish_and_clear();
-    if !args.json {
-        println!("wrote {} frames to {}", frames.len(), args.output.display());
     }
     Ok(())
 }
