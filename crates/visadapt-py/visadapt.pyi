@@ -59,6 +59,8 @@ class Conditions(TypedDict, total=False):
     """The projection of `fov`: perspective (under 180 degrees, the default) or angular fisheye."""
     acuity: bool
     """Apply the acuity blur, Eq. 7 (default True)."""
+    acuity_threshold: Optional[Literal["pooled", "envelope"]]
+    """Eq. 7's threshold contrast: "pooled" (the JND metric's, default) or "envelope" (the paper's)."""
     white_point: Optional[str]
     """Scene white adapted to D65 by CAT16: "auto" (the file's, default), "none" (the paper), "E", "D65" or "x,y"."""
     adaptation: Optional[Literal["global", "local"]]

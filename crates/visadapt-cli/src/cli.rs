@@ -132,6 +132,32 @@ pub struct ViewArgs {
     /// Skip the acuity blur (Eq. 7).
     #[arg(long)]
     pub no_acuity: bool,
+
+    /// The threshold contrast of the acuity blur (Eq. 7): `pooled`, the visibility
+    /// metric's (rods weighted by k, pooled with the cones: a full-contrast grating at the
+    /// cutoff is exactly at threshold), or `envelope`, the paper's (the more sensitive
+    /// system's alone; blurs more from 0.01 to 1 cd/m²).
+    #[arg(long, value_enum, value_name = "RULE", default_value_t = AcuityThresholdArg::Pooled)]
+    pub acuity_threshold: AcuityThresholdArg,
+}
+
+/// `--acuity-threshold`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum AcuityThresholdArg {
+    /// The JND metric's threshold (the default).
+    Pooled,
+    /// The envelope of the rod and cone thresholds (the paper's Sec. 3.2).
+    Envelope,
+}
+
+impl AcuityThresholdArg {
+    /// The library's rule.
+    pub fn rule(self) -> visadapt::acuity::AcuityThreshold {
+        match self {
+            AcuityThresholdArg::Pooled => visadapt::acuity::AcuityThreshold::Pooled,
+            AcuityThresholdArg::Envelope => visadapt::acuity::AcuityThreshold::Envelope,
+        }
+    }
 }
 
 /// How the colours of the display image are formed (map, sequence, video, serve).
@@ -317,6 +343,7 @@ impl ViewingArgs {
             world_adaptation_scotopic_cd_m2: world.and_then(|w| w.scotopic_adaptation),
             hot_pixel_fraction: self.hot_pixel_fraction,
             acuity: view.is_none_or(|v| !v.no_acuity),
+            acuity_threshold: view.map_or(defaults.acuity_threshold, |v| v.acuity_threshold.rule()),
             adaptation: self.adaptation.mode(),
             glare: self.glare.glare(),
             white_point: colour.map_or(defaults.white_point, |c| c.white_point),

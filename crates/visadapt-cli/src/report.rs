@@ -43,6 +43,9 @@ pub fn acuity_contrast(a: &visadapt::acuity::AcuityFilter) -> String {
     } else {
         format!("contrast at the cutoff {:.4} (Eq. 7)", a.gain_at_cutoff)
     };
+    if a.rule == visadapt::acuity::AcuityThreshold::Envelope {
+        s += "; rods and cones by their envelope (the paper's rule)";
+    }
     if a.extrapolated {
         s += &format!(
             "; Fig. 7 extrapolated: Shaler's data span 10^{} to 10^{} cd/m²",

@@ -233,7 +233,10 @@ fn observer_reports_the_contrast_used_and_extrapolation() {
     let v = json(&run("1e-3", true));
     assert_eq!(v["acuity_fallback"], true);
     let used = v["acuity_contrast_used"].as_f64().unwrap();
-    assert!((used - 10f64.powf(-0.395)).abs() < 1e-12);
+    // The rods' contrast held at the Weber fraction; the cones (t/L = 190) add ~1e-10 to
+    // the pooled sensitivity (the default rule), nothing to the envelope.
+    assert!((used - 10f64.powf(-0.395)).abs() < 1e-9);
+    assert_eq!(v["acuity_threshold"], "pooled");
     assert!(v["threshold_contrast"].as_f64().unwrap() > 1.0);
     let text = String::from_utf8(run("1e-3", false)).unwrap();
     assert!(
@@ -305,4 +308,42 @@ fn map_says_how_many_pixels_clip_why_and_what_to_do() {
     let v = json(&run(&["--json", "--display-max", "170"]));
     assert_eq!(v["pixels_clipped"], 0, "{v}");
     assert!(v["display_max_to_show_highest_visible_cd_m2"].is_null());
+}
+
+/// Issue 8 §4: `--acuity-threshold` chooses Eq. 7's threshold contrast. A grey scene at
+/// 0.2 cd/m² (adapted to 0.1): the default, the JND metric's pooled threshold, 0.5427
+/// (hand computation in `acuity.rs`); `envelope`, the paper's rule, the rod Weber fraction
+/// 0.4027, with a wider blur; the text report names the paper's rule.
+#[test]
+fn map_takes_the_acuity_threshold_rule() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("dim.exr");
+    let mut im = visadapt::HdrImage::zeros(32, 32);
+    im.x.fill(0.2);
+    im.y.fill(0.2);
+    im.z.fill(0.2);
+    im.absolute_units = true;
+    visadapt::io::exr::write_hdr(&im, &mut std::fs::File::create(&input).unwrap()).unwrap();
+    let out = dir.path().join("out.png");
+    let run = |extra: &[&str]| {
+        let o = visadapt()
+            .args(["map", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .args(["--fov", "2"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let pooled = json(run(&["--json"]).as_bytes());
+    let envelope = json(run(&["--json", "--acuity-threshold", "envelope"]).as_bytes());
+    assert_eq!(pooled["acuity_threshold"], "pooled");
+    assert_eq!(envelope["acuity_threshold"], "envelope");
+    let c = |v: &Value| v["threshold_contrast"].as_f64().unwrap();
+    assert!((c(&pooled) - 0.5427).abs() < 1e-3, "{pooled}");
+    assert!((c(&envelope) - 0.4027).abs() < 1e-3, "{envelope}");
+    let sigma = |v: &Value| v["acuity_blur_sigma_deg"].as_f64().unwrap();
+    assert!(sigma(&envelope) > 1.2 * sigma(&pooled));
+    assert!(run(&["--acuity-threshold", "envelope"]).contains("the paper's rule"));
+    assert!(!run(&[]).contains("the paper's rule"));
 }

@@ -5,6 +5,7 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::borrow::Cow;
+use visadapt::acuity::AcuityThreshold;
 use visadapt::glare::Glare;
 use visadapt::local::LocalAdaptation;
 use visadapt::operator::{AdaptationMode, ViewingConditions};
@@ -24,13 +25,14 @@ pub const KEYWORDS: &[&str] = &[
     "fov",                 // horizontal field of view, degrees
     "projection",          // of the fov: "perspective" (default) or "fisheye" (angular)
     "acuity",              // apply the acuity blur (Eq. 7)
-    "white_point",         // scene white for CAT16: "auto" (default), "none", "E", "D65", "x,y"
-    "adaptation",          // "global" (the paper, default) or "local" (per pixel)
-    "adaptation_radius",   // neighbourhood of local adaptation, degrees
-    "glare",               // veiling glare in the eye (CIE 135/1), off by default
-    "age",                 // glare observer's age, years
-    "pigmentation",        // glare observer's eye pigmentation (0 dark to 1.2 light blue)
-    "undershoot",          // time course: "clamped" (default) or "in-mapping" (the paper)
+    "acuity_threshold", // Eq. 7's threshold contrast: "pooled" (default) or "envelope" (the paper)
+    "white_point",      // scene white for CAT16: "auto" (default), "none", "E", "D65", "x,y"
+    "adaptation",       // "global" (the paper, default) or "local" (per pixel)
+    "adaptation_radius", // neighbourhood of local adaptation, degrees
+    "glare",            // veiling glare in the eye (CIE 135/1), off by default
+    "age",              // glare observer's age, years
+    "pigmentation",     // glare observer's eye pigmentation (0 dark to 1.2 light blue)
+    "undershoot",       // time course: "clamped" (default) or "in-mapping" (the paper)
 ];
 
 /// Parsed keyword arguments.
@@ -98,6 +100,18 @@ impl Options {
                 "hot_pixel_fraction" => c.hot_pixel_fraction = value.extract()?,
                 "fov" => o.fov_deg = Some(value.extract()?),
                 "acuity" => c.acuity = value.extract()?,
+                "acuity_threshold" => {
+                    let name: String = value.extract()?;
+                    c.acuity_threshold = match name.as_str() {
+                        "pooled" => AcuityThreshold::Pooled,
+                        "envelope" => AcuityThreshold::Envelope,
+                        _ => {
+                            return Err(PyValueError::new_err(format!(
+                                "invalid acuity_threshold '{name}': pooled or envelope"
+                            )));
+                        }
+                    }
+                }
                 "white_point" => {
                     let name: String = value.extract()?;
                     c.white_point = name.parse().map_err(|e: String| {

@@ -65,6 +65,9 @@ fn lib_err(e: visadapt::Error) -> PyErr {
 ///     projection: of `fov`: "perspective" (under 180 degrees, the default) or "fisheye"
 ///         (angular fisheye, up to 360 degrees).
 ///     acuity: apply the acuity blur (default True).
+///     acuity_threshold: Eq. 7's threshold contrast: "pooled" (the JND metric's: a
+///         full-contrast grating at the cutoff scores 1 JND; default) or "envelope" (the
+///         paper's, the more sensitive system alone).
 ///     white_point: the scene white adapted to the display's D65 by CAT16: "auto" (the
 ///         file's, default), "none" (the paper's colours), "E", "D65" or "x,y".
 ///     adaptation: "global" (one level for the scene, the paper, default) or "local" (each

@@ -38,7 +38,7 @@
 //! level of step 1 anchors the map). The default, [`AdaptationMode::Global`], is the
 //! paper's model.
 
-use crate::acuity::{self, AcuityFilter};
+use crate::acuity::{self, AcuityFilter, AcuityThreshold};
 use crate::adaptation::{
     ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2, DEFAULT_HOT_PIXEL_FRACTION, highest_visible_of,
 };
@@ -82,6 +82,11 @@ pub struct ViewingConditions {
     pub hot_pixel_fraction: f64,
     /// Apply the acuity blur (Eq. 7).
     pub acuity: bool,
+    /// How Eq. 7's threshold contrast combines the rods and the cones: default
+    /// [`AcuityThreshold::Pooled`], the visibility metric's (a full-contrast grating at the
+    /// cutoff scores 1 JND); [`AcuityThreshold::Envelope`] for the paper's
+    /// (see [`acuity`](crate::acuity#the-threshold-contrast-c-beyond-the-paper-one-definition-with-the-jnd-metric)).
+    pub acuity_threshold: AcuityThreshold,
     /// The view, overriding the file's; `None` to use the file's or a
     /// [`DEFAULT_FOV_DEG`] perspective view.
     pub view: Option<View>,
@@ -122,6 +127,7 @@ impl Default for ViewingConditions {
             world_adaptation_scotopic_cd_m2: None,
             hot_pixel_fraction: DEFAULT_HOT_PIXEL_FRACTION,
             acuity: true,
+            acuity_threshold: AcuityThreshold::Pooled,
             view: None,
             adaptation: AdaptationMode::Global,
             white_point: WhitePoint::Auto,
@@ -626,7 +632,7 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
         })?,
         None => IDENTITY,
     };
-    let acuity = AcuityFilter::new(lwa, lwa_s);
+    let acuity = AcuityFilter::with_rule(lwa, lwa_s, conditions.acuity_threshold);
     let blur_sigma_px = match (conditions.acuity, ppd) {
         (true, Some(ppd)) => {
             // The Gaussian cannot usefully be wider than the image itself.

@@ -82,6 +82,7 @@ pub fn map_json(r: &Report, stats: &PixelStats, input_scale: f64) -> Value {
         "threshold_contrast": r.acuity.threshold_contrast,
         "acuity_contrast_used": r.acuity.gain_at_cutoff,
         "acuity_fallback": r.acuity.fallback,
+        "acuity_threshold": r.acuity.rule.name(),
         "acuity_extrapolated": r.acuity.extrapolated,
         "acuity_blur_sigma_deg": r.acuity.sigma_deg,
         "acuity_applied": r.acuity_applied,
@@ -213,6 +214,7 @@ pub fn observer_json(o: &Observer) -> Value {
         "acuity_contrast_used": o.acuity.gain_at_cutoff,
         "acuity_blur_sigma_deg": o.acuity.sigma_deg,
         "acuity_fallback": o.acuity.fallback,
+        "acuity_threshold": o.acuity.rule.name(),
         "acuity_extrapolated": o.acuity.extrapolated,
     })
 }

@@ -152,8 +152,11 @@
 //! `blur_sigma_px` of the steady-state report). During a transient the *reported* acuity
 //! ([`Adaptation::acuity_cycles_per_degree`]) is the highest frequency at which a
 //! full-contrast grating, filtered by that Gaussian, still exceeds the *current* threshold
-//! contrast: `ω(t) = ω_c·sqrt(ln(1/c(t)) / ln(1/c_∞))`, with `c(t) = c_∞·T(t)/t(L)` for the
-//! more sensitive mechanism, and 0 when `c(t) ≥ 1` (nothing resolvable). The displayed image
+//! contrast: `ω(t) = ω_c·sqrt(ln(1/c(t)) / ln(1/c_∞))`, with `c_∞` the steady filter's gain
+//! at the cutoff and `c(t) = c_∞·C(t)/C_∞`, where `C` is the threshold contrast of the
+//! current thresholds `T(t)` and of the steady ones, both combined by the steady filter's
+//! rule ([`AcuityThreshold`](crate::acuity::AcuityThreshold): by default the JND metric's,
+//! rods weighted by `k`), and 0 when `c(t) ≥ 1` (nothing resolvable). The displayed image
 //! reproduces exactly this: with the Gaussian `G` and `m(t)`, a full-contrast grating at
 //! `ω` is above the display observer's threshold iff `G(ω) > c(t)`, so no extra blur is
 //! needed and the steady state is unchanged.
@@ -166,7 +169,6 @@ use crate::scotopic::EQUAL_ENERGY_SP_RATIO;
 use crate::tvi::{
     CONE_FLOOR_LOG, ROD_FLOOR_LOG, cone_threshold_cd_m2, log_cone_adaptation_for_threshold,
     log_cone_threshold, log_rod_adaptation_for_threshold, log_rod_threshold,
-    rod_threshold_scotopic_cd_m2,
 };
 use crate::{Error, Result};
 
@@ -669,8 +671,12 @@ impl Adaptation {
         if !(l > 0.0 && ls > 0.0) {
             return steady.cutoff_cycles_per_degree;
         }
-        let now = (self.cone_threshold_cd_m2() / l).min(self.rod_threshold_scotopic_cd_m2() / ls);
-        let adapted = (cone_threshold_cd_m2(l) / l).min(rod_threshold_scotopic_cd_m2(ls) / ls);
+        let now = steady.rule.combine(
+            self.cone_threshold_cd_m2() / l,
+            self.rod_threshold_scotopic_cd_m2() / ls,
+            rod_weight(ls),
+        );
+        let adapted = steady.threshold_contrast;
         let gain = steady.gain_at_cutoff;
         let c = gain * (now / adapted);
         if c >= 1.0 {

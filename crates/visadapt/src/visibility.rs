@@ -36,10 +36,16 @@
 //!    negative channels as 0). Their differences `ΔY = Y_T − Y_R`, `ΔV = V_T − V_R`.
 //! 2. **Acuity (Eq. 7).** Both difference planes are filtered with the acuity Gaussian `G`,
 //!    whose response at the cutoff frequency `ω_c(L_wa)` equals the threshold contrast
-//!    `t(L_wa)/L_wa`. Filtering the difference is filtering both images and subtracting (the
-//!    filter is linear). So a full-contrast grating at `ω_c` on a background at the
-//!    adaptation luminance comes out at 1 JND, a finer one below, a coarser one above:
-//!    detail above the acuity cutoff is invisible.
+//!    of this metric, `c = 1/((1/c_p)^β + (k/c_s)^β)^(1/β)` with `c_p = t_p/L_wa` and
+//!    `c_s = t_s/L_wa,s` (steps 3–4 for a change in the background's colour; the default
+//!    [`AcuityThreshold::Pooled`](crate::acuity::AcuityThreshold), see
+//!    [`acuity`](crate::acuity#the-threshold-contrast-c-beyond-the-paper-one-definition-with-the-jnd-metric)).
+//!    Filtering the difference is filtering both images and subtracting (the filter is
+//!    linear). So a full-contrast grating at `ω_c` on a background at the adaptation
+//!    luminance comes out at 1 JND at every level where Eq. 7 has a solution, a finer one
+//!    below, a coarser one above: detail above the acuity cutoff is invisible. (Below the
+//!    rod Weber range, under 0.016 cd/m², the blur's fallback passes a little less: 0.91
+//!    JND at 0.01 cd/m².)
 //! 3. **Each mechanism in its threshold units.**
 //!    cones `d_c = |G∗ΔY| / t_p`, with `t_p` the cone threshold (Eq. 4) in cd/m²;
 //!    rods `d_r = k·|G∗ΔV| / t_s`, with `t_s` the rod threshold (Eq. 5) in scotopic cd/m²
@@ -200,7 +206,7 @@ impl Sensitivity {
 
 /// Probability summation of two detectabilities: `(a^β + b^β)^(1/β)`, computed without
 /// overflow as `m·(1 + (n/m)^β)^(1/β)` with `m = max(a, b)`, `n = min(a, b)`.
-fn pool(a: f64, b: f64) -> f64 {
+pub(crate) fn pool(a: f64, b: f64) -> f64 {
     let (m, n) = if a >= b { (a, b) } else { (b, a) };
     if m == 0.0 {
         return 0.0;

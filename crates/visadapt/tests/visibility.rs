@@ -315,9 +315,10 @@ fn same_relative_noise_visible_by_day_invisible_at_night() {
 /// recursive filter (σ ≥ 5 px, moonlight here), times the grating's unfiltered JNDs.
 ///
 /// With the grating's peak at twice the mean `L`, the Sec. 4.4 rule adapts the observer to
-/// `L`, and Eq. 7 makes the Gaussian's gain at the cutoff `ω_c(L)` equal to `t(L)/L`, so the
-/// grating at `ω_c` is displayed at exactly 1 JND (cones, 100 cd/m²); at frequency `f` its
-/// amplitude is `c^((f/ω_c)²)·L` with `c = t(L)/L`.
+/// `L`, and Eq. 7 makes the Gaussian's gain at the cutoff `ω_c(L)` equal to the threshold
+/// contrast `c = t(L)/L` of the JND metric (the cones' at 100 cd/m², rods and cones pooled
+/// at 0.04), so the grating at `ω_c` is displayed at exactly 1 JND; at frequency `f` its
+/// amplitude is `c^((f/ω_c)²)·L`.
 #[test]
 fn gratings_above_the_acuity_cutoff_are_invisible_below_visible() {
     let (w, h) = (1200, 4);
@@ -355,12 +356,12 @@ fn gratings_above_the_acuity_cutoff_are_invisible_below_visible() {
     assert!((above - c.powf(1.25)).abs() < 0.02, "{above}");
     assert!(above < 0.05, "{above}");
 
-    // Moonlight, 0.04 cd/m²: cutoff 17.25·atan(1.4·log 0.04 + 0.35) + 25.72 = 8.225 c/deg,
-    // c = t_s(0.0904)/0.0904 = 10^-0.395 = 0.4027 (rod Weber fraction). Threshold of a
-    // white change: rods with k of Eq. 6 (smoothstep in log scotopic luminance over
+    // Moonlight, 0.04 cd/m²: cutoff 17.25·atan(1.4·log 0.04 + 0.35) + 25.72 = 8.225 c/deg.
+    // Threshold of a white change: rods (t_s(0.0904)/0.0904 = 10^-0.395 = 0.4027, the rod
+    // Weber fraction) with k of Eq. 6 (smoothstep in log scotopic luminance over
     // 0.02261–22.61, 0.895 here) pooled with the cones: 0.01799 cd/m², so the unfiltered
-    // grating is 0.04 / 0.01799 = 2.22 JND: tolerance 0.005·2.22 = 0.011. The Gaussian
-    // is 0.02610°, 7.44 px.
+    // grating is 0.04 / 0.01799 = 2.22 JND: tolerance 0.005·2.22 = 0.011. Eq. 7 uses the
+    // same threshold, c = 0.01799/0.04 = 0.4498: the Gaussian is 0.02446°, 6.97 px.
     let cutoff_night = 17.25 * (1.4 * 0.04f64.log10() + 0.35).atan() + 25.72;
     assert!((cutoff_night - 8.225).abs() < 0.01);
     let ls: f64 = 2.261 * 0.04;
@@ -372,21 +373,23 @@ fn gratings_above_the_acuity_cutoff_are_invisible_below_visible() {
         (k - 0.895).abs() < 1e-3 && (threshold - 0.017_99).abs() < 1e-4,
         "{k} {threshold}"
     );
-    let c_night = ts(ls) / ls;
+    let c_night = threshold / 0.04;
     let expected = |f: f64| 0.04 / threshold * c_night.powf((f / cutoff_night).powi(2));
-    let below = run(0.04, 0.5 * cutoff_night); // 1.77 JND
+    let at_cutoff = run(0.04, cutoff_night); // 1 JND
+    assert!((at_cutoff - 1.0).abs() < 0.011, "{at_cutoff}");
+    let below = run(0.04, 0.5 * cutoff_night); // c^-0.75 = 1.82 JND
     assert!(
         (below - expected(0.5 * cutoff_night)).abs() < 0.015,
         "{below}"
     );
-    assert!(below > 1.7);
-    let above = run(0.04, 1.5 * cutoff_night); // 0.29 JND
+    assert!(below > 1.8);
+    let above = run(0.04, 1.5 * cutoff_night); // c^1.25 = 0.368 JND
     assert!(
         (above - expected(1.5 * cutoff_night)).abs() < 0.015,
         "{above}"
     );
-    assert!(above < 0.31);
-    // The grating invisible in moonlight (12.3 c/deg) is 14.8 JND in daylight.
+    assert!(above < 0.39);
+    // The grating near-invisible in moonlight (12.3 c/deg) is 14.8 JND in daylight.
     let f = 1.5 * cutoff_night;
     let day = run(100.0, f);
     let expected_day = 100.0 / tp(100.0) * c.powf((f / cutoff_day).powi(2));
@@ -536,7 +539,123 @@ fn viewer_from_an_image_uses_the_operators_acuity_blur() {
         vertical_deg: 0.025,
     });
     let (viewer, report) = Viewer::for_image(&image, &ViewingConditions::default()).unwrap();
-    // Adapted to 0.04 cd/m²: sigma = sqrt(ln(1/0.4027)/2)/(π·8.225) = 0.02610 deg, 400 px/deg.
-    assert!((report.acuity.sigma_deg - 0.026_10).abs() < 2e-4);
+    // Adapted to 0.04 cd/m²: the pooled threshold contrast of Eq. 4-6 is 0.4498 (k = 0.895,
+    // see the grating test), sigma = sqrt(ln(1/0.4498)/2)/(π·8.225) = 0.02446 deg, 400 px/deg.
+    assert!(
+        (report.acuity.sigma_deg - 0.024_46).abs() < 2e-5,
+        "{}",
+        report.acuity.sigma_deg
+    );
     assert!((viewer.acuity_sigma_px - 400.0 * report.acuity.sigma_deg).abs() < 1e-9);
+}
+
+/// Issue 8 §4: one definition of the threshold for the acuity blur and the JND metric, so
+/// that a full-contrast sinusoidal grating at the cutoff frequency `ω_c(L)`, on a field at
+/// the adaptation luminance `L`, scores 1 JND at every level where Eq. 7 has a solution.
+/// It failed before: the blur passed the envelope `min(c_p, c_s)` while the metric weights
+/// the rods by `k`, and the grating scored 0.742 JND at 0.1 cd/m² and 0.578 at 0.3.
+///
+/// Expected values are recomputed here from Eq. 4-6 (k: the smoothstep of `mesopic.rs`):
+/// the pooled threshold contrast `c = 1/((1/c_p)^3.5 + (k/c_s)^3.5)^(1/3.5)` makes the
+/// grating exactly 1 JND; below the rod Weber range (L < 0.016 cd/m², only 0.01 here) the
+/// blur holds the rods' contrast at the Weber fraction 0.4027 and the grating scores
+/// `0.4027/c_s` = 0.909. Each level is seen at 6 pixels per cycle of its cutoff, where the
+/// Gaussian (1.3-2.3 px) is the blur module's exact kernel, accurate to 0.1 % of the gain:
+/// the tolerance is 0.01 JND against that value, and the issue's criterion, ±20 % of 1 JND,
+/// is asserted as well. The same through `visibility::compare`, globally and with local
+/// adaptation (each pixel's own Gaussian from the adaptation map, blurred at sigmas
+/// 2^(1/3) apart and interpolated: 3 %).
+#[test]
+fn full_contrast_grating_at_the_cutoff_is_one_jnd_from_001_to_1e4_cd_m2() {
+    use visadapt::acuity::{AcuityFilter, AcuityThreshold};
+    use visadapt::operator::AdaptationMode;
+    let (w, h) = (1200, 16);
+    let cutoff = |l: f64| 17.25 * (1.4 * l.log10() + 0.35).atan() + 25.72;
+    let k = |ls: f64| {
+        let u = ((ls.log10() - 0.02261f64.log10()) / 3.0).clamp(0.0, 1.0);
+        1.0 - u * u * (3.0 - 2.0 * u)
+    };
+    let pool = |a: f64, b: f64| (a.powf(3.5) + b.powf(3.5)).powf(1.0 / 3.5);
+    let weber = 10f64.powf(-0.395);
+    // The grating: reference at `l`, test `l·(1 + cos)`, seen at `ppd`.
+    let images = |l: f64, ppd: f64| {
+        let reference = grey(w, h, l as f32);
+        let mut test = reference.clone();
+        for y in 0..h {
+            for x in 0..w {
+                let phase = 2.0 * std::f64::consts::PI * cutoff(l) * x as f64 / ppd;
+                perturb(&mut test, y * w + x, l * phase.cos());
+            }
+        }
+        (reference, test)
+    };
+    // The largest JND in the middle half of row 8 (the blur's replicated edges bend the
+    // grating near the left and right ends).
+    let peak = |jnd: &[f32]| {
+        jnd[8 * w + w / 4..8 * w + 3 * w / 4]
+            .iter()
+            .fold(0f32, |m, &v| m.max(v)) as f64
+    };
+    let mut levels = 0;
+    for i in 0..=24 {
+        let l = 10f64.powf(-2.0 + i as f64 / 4.0); // 0.01 .. 1e4 cd/m²
+        let ls = SP_WHITE as f64 * l;
+        let (cp, cs, k) = (tp(l) / l, ts(ls) / ls, k(ls));
+        let gain = 1.0 / pool(1.0 / cp, k / cs.min(weber));
+        let expected = pool(gain / cp, k * gain / cs);
+        let ppd = 6.0 * cutoff(l);
+        let (reference, test) = images(l, ppd);
+        let viewer = Viewer::steady_state(l, ls, Some(ppd));
+        let got = peak(&difference(&reference, &test, &viewer).unwrap().jnd);
+        println!("{l:.4} cd/m²: grating at the cutoff {got:.3} JND (expected {expected:.3})");
+        assert!((got - 1.0).abs() <= 0.2, "{l} cd/m²: {got} JND");
+        assert!(
+            (got - expected).abs() < 0.01,
+            "{l} cd/m²: {got} JND, expected {expected}"
+        );
+        if ls >= 10f64.powf(-1.44) {
+            assert!((expected - 1.0).abs() < 1e-9);
+        }
+
+        // The operator's observer of the reference, global and local.
+        for local in [false, true] {
+            let conditions = ViewingConditions {
+                world_adaptation_cd_m2: Some(l),
+                world_adaptation_scotopic_cd_m2: Some(ls),
+                view: Some(View::angular_fisheye(w as f64 / ppd, w, h)),
+                adaptation: if local {
+                    AdaptationMode::Local(Default::default())
+                } else {
+                    AdaptationMode::Global
+                },
+                ..Default::default()
+            };
+            let (d, _) = visadapt::visibility::compare(&reference, &test, &conditions).unwrap();
+            let got = peak(&d.jnd);
+            let tol = if local { 0.03 } else { 0.01 };
+            assert!(
+                (got - expected).abs() < tol,
+                "{l} cd/m², local {local}: {got} JND, expected {expected}"
+            );
+        }
+
+        // The paper's rule stays reachable, with its calibration of the metric.
+        let paper = AcuityFilter::with_rule(l, ls, AcuityThreshold::Envelope);
+        let envelope = Viewer {
+            acuity_sigma_px: paper.sigma_deg * ppd,
+            ..viewer
+        };
+        let got = peak(&difference(&reference, &test, &envelope).unwrap().jnd);
+        let gain = cp.min(cs.min(weber));
+        let expected = pool(gain / cp, k * gain / cs);
+        assert!(
+            (got - expected).abs() < 0.01,
+            "{l} cd/m² (envelope): {got} JND, expected {expected}"
+        );
+        if (l - 0.1).abs() < 1e-9 {
+            assert!((expected - 0.742).abs() < 1e-3, "{expected}");
+        }
+        levels += 1;
+    }
+    assert_eq!(levels, 25);
 }

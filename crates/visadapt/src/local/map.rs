@@ -274,6 +274,7 @@ impl AdaptationMap {
                     report.world_adaptation_cd_m2,
                     report.world_adaptation_scotopic_cd_m2,
                 );
+                let rule = report.acuity.rule;
                 Some(
                     offset_grid
                         .iter()
@@ -281,8 +282,8 @@ impl AdaptationMap {
                         .map(|(&dp, &ds)| {
                             let la = lwa * 10f64.powf(f64::from(dp));
                             let las = lwa_s * 10f64.powf(f64::from(ds));
-                            let s =
-                                (AcuityFilter::new(la, las).sigma_deg * ppd).min(w.max(h) as f64);
+                            let s = (AcuityFilter::with_rule(la, las, rule).sigma_deg * ppd)
+                                .min(w.max(h) as f64);
                             if s >= MIN_BLUR_SIGMA_PX {
                                 s as f32
                             } else {
