@@ -27,6 +27,8 @@
 //! the untransformed XYZ and V, so Eqs. 1–7 are unchanged, and the rod image stays grey (the
 //! display white). [`WhitePoint::Off`] keeps the paper's behaviour (no adaptation).
 
+use crate::limits::saturating_f32;
+
 /// A CIE 1931 xy chromaticity.
 pub type Xy = [f64; 2];
 
@@ -212,19 +214,12 @@ impl Chromaticities {
 /// [`Chromaticities::rgb_to_xyz`]), times `scale`, in `f64`. Results beyond the `f32`
 /// range saturate to ±`f32::MAX`; NaN and infinities pass through.
 pub fn rgb_planes_to_xyz(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
-    let saturate = |v: f64| {
-        if v.is_finite() {
-            v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
-        } else {
-            v as f32
-        }
-    };
     let m: Vec<f64> = m.iter().flatten().map(|v| v * scale).collect();
     for ((pr, pg), pb) in r.iter_mut().zip(g.iter_mut()).zip(b.iter_mut()) {
         let (cr, cg, cb) = (f64::from(*pr), f64::from(*pg), f64::from(*pb));
-        *pr = saturate(m[0] * cr + m[1] * cg + m[2] * cb);
-        *pg = saturate(m[3] * cr + m[4] * cg + m[5] * cb);
-        *pb = saturate(m[6] * cr + m[7] * cg + m[8] * cb);
+        *pr = saturating_f32(m[0] * cr + m[1] * cg + m[2] * cb);
+        *pg = saturating_f32(m[3] * cr + m[4] * cg + m[5] * cb);
+        *pb = saturating_f32(m[6] * cr + m[7] * cg + m[8] * cb);
     }
 }
 

@@ -281,6 +281,17 @@ pub struct VeilReport {
 pub fn apply(image: &HdrImage, view: &View, glare: &Glare) -> Result<(HdrImage, VeilReport)> {
     image.check_consistent()?;
     glare.validate()?;
+    let mut retina = image.clone();
+    let report = apply_in_place(&mut retina, view, glare)?;
+    Ok((retina, report))
+}
+
+/// [`apply`] over the image's own planes: the veil is added in place (and a scotopic plane
+/// estimated when the image has none), so that no second image is allocated. On an error
+/// the image is unchanged.
+pub fn apply_in_place(image: &mut HdrImage, view: &View, glare: &Glare) -> Result<VeilReport> {
+    image.check_consistent()?;
+    glare.validate()?;
     let (w, h) = (image.width, image.height);
     let geometry = Geometry::new(view, w, h)?;
     let grid = Grid::new(&geometry, view, w, h)?;
@@ -290,8 +301,8 @@ pub fn apply(image: &HdrImage, view: &View, glare: &Glare) -> Result<(HdrImage, 
     let kernel = grid.kernel_spectrum(glare, norm, near_radius_deg);
 
     // The four planes the veil goes on; the scotopic one estimated before the veil.
-    let scotopic: Vec<f32> = match &image.scotopic {
-        Some(s) => s.clone(),
+    let scotopic: Vec<f32> = match image.scotopic.take() {
+        Some(s) => s,
         None => image
             .x
             .iter()
@@ -311,17 +322,16 @@ pub fn apply(image: &HdrImage, view: &View, glare: &Glare) -> Result<(HdrImage, 
     let lum: Vec<Vec<f64>> = flux.iter().map(veil).collect();
     drop(flux);
 
-    let mut out = image.clone();
     let mut s_plane = scotopic;
     let keep = (1.0 - scattered) as f32;
     let mean_veil = grid.add_veil(
         &geometry,
         w,
-        [&mut out.x, &mut out.y, &mut out.z, &mut s_plane],
+        [&mut image.x, &mut image.y, &mut image.z, &mut s_plane],
         [&lum[0], &lum[1], &lum[2], &lum[3]],
         keep,
     );
-    out.scotopic = Some(s_plane);
+    image.scotopic = Some(s_plane);
     let centre = |l: &[f64]| grid.sample(l, grid.to_grid(0.0, 0.0));
     let report = VeilReport {
         glare: *glare,
@@ -334,7 +344,7 @@ pub fn apply(image: &HdrImage, view: &View, glare: &Glare) -> Result<(HdrImage, 
         veil_at_centre_scotopic_cd_m2: centre(&lum[3]),
         mean_veil_cd_m2: mean_veil,
     };
-    Ok((out, report))
+    Ok(report)
 }
 
 /// Where every pixel looks: azimuthal equidistant coordinates about the view axis, in

@@ -446,22 +446,22 @@ pub fn map(image: &HdrImage, conditions: &ViewingConditions) -> Result<Output> {
 }
 
 /// [`map`], consuming the image: the display planes are written over its X, Y, Z planes
-/// ([`apply_owned`]), so that the working set is one image instead of two (12 bytes per
-/// pixel, 16 with a scotopic plane, instead of 24–28; see the README's "Limits and
-/// safety"). The result is the same as [`map`]'s, bit for bit. With
-/// [`AdaptationMode::Local`] it is [`map`] (every pixel's mapping reads the adaptation map
-/// of the whole scene).
+/// ([`apply_owned`], [`local::apply_owned`]) and the glare stage adds its veil in place
+/// ([`prepare_owned`]), so that the working set is one image instead of two (12 bytes per
+/// pixel, 16 with a scotopic plane, instead of 24–28; local adaptation adds its map, 12;
+/// see the README's "Limits and safety"). The result is the same as [`map`]'s, bit for
+/// bit.
 pub fn map_owned(image: HdrImage, conditions: &ViewingConditions) -> Result<Output> {
-    if conditions.adaptation != AdaptationMode::Global {
-        return map(&image, conditions);
-    }
-    let (scene, report) = prepare(&image, conditions)?;
-    // The glare stage makes a new image: the input can go before the mapping.
-    let scene = match scene {
-        Cow::Owned(retina) => retina,
-        Cow::Borrowed(_) => image,
+    let (scene, mut report) = prepare_owned(image, conditions)?;
+    let (display, stats) = match conditions.adaptation {
+        AdaptationMode::Global => apply_owned(scene, &report.mapping),
+        AdaptationMode::Local(options) => {
+            let map = local_map(&scene, &report, conditions, &options)?;
+            let mapping = LocalMapping::steady_state(&map, &report, options.rod_saturation);
+            report.local = Some(LocalReport::of(&map, options.rod_saturation));
+            local::apply_owned(scene, &map, &mapping)
+        }
     };
-    let (display, stats) = apply_owned(scene, &report.mapping);
     Ok(Output {
         image: display,
         report,
@@ -541,7 +541,29 @@ pub fn prepare<'a>(
     };
     let without = plan(image, conditions)?;
     let (retina, veil) = glare::apply(image, &without.view, g)?;
-    let mut report = plan(&retina, conditions)?;
+    let report = with_glare(plan(&retina, conditions)?, &without, veil);
+    Ok((Cow::Owned(retina), report))
+}
+
+/// [`prepare`], consuming the image: the glare stage adds its veil over the image's own
+/// planes ([`glare::apply_in_place`]) instead of making a second image. Returns the scene
+/// to apply the mapping to and the report, the same as [`prepare`]'s.
+pub fn prepare_owned(
+    mut image: HdrImage,
+    conditions: &ViewingConditions,
+) -> Result<(HdrImage, Report)> {
+    let Some(g) = &conditions.glare else {
+        let report = plan(&image, conditions)?;
+        return Ok((image, report));
+    };
+    let without = plan(&image, conditions)?;
+    let veil = glare::apply_in_place(&mut image, &without.view, g)?;
+    let report = with_glare(plan(&image, conditions)?, &without, veil);
+    Ok((image, report))
+}
+
+/// The report of the veiled scene `report`, completed from the report `without` glare.
+fn with_glare(mut report: Report, without: &Report, veil: VeilReport) -> Report {
     // The glare stage writes a scotopic plane; where it came from is the input's business.
     report.scotopic_source = without.scotopic_source;
     report.view_source = without.view_source;
@@ -550,7 +572,7 @@ pub fn prepare<'a>(
         world_adaptation_without_glare_cd_m2: without.world_adaptation_cd_m2,
         world_adaptation_without_glare_scotopic_cd_m2: without.world_adaptation_scotopic_cd_m2,
     });
-    Ok((Cow::Owned(retina), report))
+    report
 }
 
 /// Compute the global quantities of the model for an image: adaptation levels, scale
@@ -751,18 +773,10 @@ pub fn apply(image: &HdrImage, mapping: &Mapping) -> (DisplayImage, PixelStats) 
 /// [`apply`] writing into an existing display image, reusing its memory (for video:
 /// no allocation per frame once the buffers have the right size).
 pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -> PixelStats {
-    let n = image.len();
     let c = Coefficients::new(mapping);
-    out.width = image.width;
-    out.height = image.height;
-    out.display_max_cd_m2 = mapping.display_max_cd_m2 as f32;
-    for plane in [&mut out.r, &mut out.g, &mut out.b] {
-        plane.resize(n, 0.0);
-    }
-    let DisplayImage { r, g, b, .. } = out;
-    let blur = mapping.blur_sigma_px > 0.0;
-    // Without a blur the clipping is done in the same pass (one trip through memory).
-    let stats = par_chunks(r, g, b, |start, r, g, b| {
+    let [r, g, b] = display_planes(out, image.width, image.height, mapping.display_max_cd_m2);
+    let blur = acuity_blur(mapping, image.width, image.height);
+    let stats = map_pass(r, g, b, blur.is_none(), |start, r, g, b| {
         let end = start + r.len();
         let scotopic = image.scotopic.as_ref().map(|s| &s[start..end]);
         let xyz = [
@@ -770,13 +784,103 @@ pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -
             &image.y[start..end],
             &image.z[start..end],
         ];
-        let mut s = map_chunk(&c, xyz, scotopic, r, g, b);
-        if !blur {
+        map_chunk(&c, xyz, scotopic, r, g, b)
+    });
+    blur_and_clip(stats, r, g, b, blur)
+}
+
+/// The display planes of `out`, sized for a `width × height` image on a display of
+/// `display_max_cd_m2` (their memory reused): the opening of every mapping into a display
+/// image.
+pub(crate) fn display_planes(
+    out: &mut DisplayImage,
+    width: usize,
+    height: usize,
+    display_max_cd_m2: f64,
+) -> [&mut [f32]; 3] {
+    out.width = width;
+    out.height = height;
+    out.display_max_cd_m2 = display_max_cd_m2 as f32;
+    let DisplayImage { r, g, b, .. } = out;
+    [r, g, b].map(|plane| {
+        plane.resize(width * height, 0.0);
+        plane.as_mut_slice()
+    })
+}
+
+/// The mapping pass over the display planes `r`, `g`, `b`: `map_chunk(start, r, g, b)`
+/// (pixels `start..start + r.len()`) over parallel chunks, with the clipping of [`apply`]
+/// in the same pass (one trip through memory) when `clip` (no blur follows). Shared by the
+/// global operator and [`crate::local`]; [`blur_and_clip`] is the rest.
+pub(crate) fn map_pass(
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+    clip: bool,
+    map_chunk: impl Fn(usize, &mut [f32], &mut [f32], &mut [f32]) -> PixelStats + Sync,
+) -> PixelStats {
+    par_chunks(r, g, b, |start, r, g, b| {
+        let mut s = map_chunk(start, r, g, b);
+        if clip {
             s.clipped = clip_chunk(r, g, b).clipped;
         }
         s
-    });
-    blur_and_clip(stats, r, g, b, image.width, image.height, mapping)
+    })
+}
+
+/// A per-pixel mapping done in place: the X, Y, Z samples `x`, `y`, `z` become R, G, B.
+/// `map(lo, [x, y, z], r, g, b)` maps the pixels `lo..lo + r.len()` of the slices; pieces
+/// of a few KiB go through a buffer on the stack (in the L1 cache) and are copied back, so
+/// no second set of planes is allocated.
+pub(crate) fn map_in_place(
+    x: &mut [f32],
+    y: &mut [f32],
+    z: &mut [f32],
+    map: impl Fn(usize, [&[f32]; 3], &mut [f32], &mut [f32], &mut [f32]) -> PixelStats,
+) -> PixelStats {
+    const PIECE: usize = 1024;
+    let mut stats = PixelStats::default();
+    let mut buffer = [[0.0f32; PIECE]; 3];
+    for lo in (0..x.len()).step_by(PIECE) {
+        let hi = (lo + PIECE).min(x.len());
+        let [or, og, ob] = &mut buffer;
+        let (or, og, ob) = (&mut or[..hi - lo], &mut og[..hi - lo], &mut ob[..hi - lo]);
+        let piece = map(lo, [&x[lo..hi], &y[lo..hi], &z[lo..hi]], or, og, ob);
+        stats = stats.add(piece);
+        x[lo..hi].copy_from_slice(or);
+        y[lo..hi].copy_from_slice(og);
+        z[lo..hi].copy_from_slice(ob);
+    }
+    stats
+}
+
+/// The stages after the [`map_pass`]: the acuity `blur` and the clipping after it (none:
+/// the map pass clipped).
+pub(crate) fn blur_and_clip(
+    mut stats: PixelStats,
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+    blur: Option<impl FnOnce(&mut [&mut [f32]])>,
+) -> PixelStats {
+    if let Some(blur) = blur {
+        blur(&mut [&mut *r, &mut *g, &mut *b]);
+        stats.clipped = par_chunks(r, g, b, |_, r, g, b| clip_chunk(r, g, b)).clipped;
+    }
+    stats
+}
+
+/// The acuity stage of a global `mapping` (Eq. 7: one Gaussian for the whole image), or
+/// `None` when it has no blur.
+fn acuity_blur(
+    mapping: &Mapping,
+    width: usize,
+    height: usize,
+) -> Option<impl FnOnce(&mut [&mut [f32]]) + use<>> {
+    let sigma = mapping.blur_sigma_px;
+    (sigma > 0.0).then_some(move |planes: &mut [&mut [f32]]| {
+        crate::blur::gaussian_blur_planes(planes, width, height, sigma as f32)
+    })
 }
 
 /// [`apply`], consuming the image: each piece of the X, Y, Z planes is mapped through a
@@ -797,32 +901,15 @@ pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelSt
         ..
     } = image;
     assert!(r.len() == width * height && g.len() == r.len() && b.len() == r.len());
-    let blur = mapping.blur_sigma_px > 0.0;
-    let stats = par_chunks(&mut r, &mut g, &mut b, |start, r, g, b| {
-        let end = start + r.len();
-        let s = scotopic.as_ref().map(|s| &s[start..end]);
-        // Pieces of a few KiB, through a buffer on the stack (in the L1 cache).
-        const PIECE: usize = 1024;
-        let mut stats = PixelStats::default();
-        let mut buffer = [[0.0f32; PIECE]; 3];
-        for lo in (0..r.len()).step_by(PIECE) {
-            let hi = (lo + PIECE).min(r.len());
-            let [or, og, ob] = &mut buffer;
-            let (or, og, ob) = (&mut or[..hi - lo], &mut og[..hi - lo], &mut ob[..hi - lo]);
-            let xyz = [&r[lo..hi], &g[lo..hi], &b[lo..hi]];
-            let piece = map_chunk(&c, xyz, s.map(|s| &s[lo..hi]), or, og, ob);
-            stats = stats.add(piece);
-            r[lo..hi].copy_from_slice(or);
-            g[lo..hi].copy_from_slice(og);
-            b[lo..hi].copy_from_slice(ob);
-        }
-        if !blur {
-            stats.clipped = clip_chunk(r, g, b).clipped;
-        }
-        stats
+    let blur = acuity_blur(mapping, width, height);
+    let stats = map_pass(&mut r, &mut g, &mut b, blur.is_none(), |start, r, g, b| {
+        let s = scotopic.as_ref().map(|s| &s[start..start + r.len()]);
+        map_in_place(r, g, b, |lo, xyz, or, og, ob| {
+            map_chunk(&c, xyz, s.map(|s| &s[lo..lo + or.len()]), or, og, ob)
+        })
     });
     drop(scotopic);
-    let stats = blur_and_clip(stats, &mut r, &mut g, &mut b, width, height, mapping);
+    let stats = blur_and_clip(stats, &mut r, &mut g, &mut b, blur);
     let display = DisplayImage {
         width,
         height,
@@ -832,29 +919,6 @@ pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelSt
         display_max_cd_m2: mapping.display_max_cd_m2 as f32,
     };
     (display, stats)
-}
-
-/// The stages after the per-pixel mapping: the acuity blur and the clipping after it
-/// (without a blur the clipping was done in the mapping's pass).
-fn blur_and_clip(
-    mut stats: PixelStats,
-    r: &mut [f32],
-    g: &mut [f32],
-    b: &mut [f32],
-    width: usize,
-    height: usize,
-    mapping: &Mapping,
-) -> PixelStats {
-    if mapping.blur_sigma_px > 0.0 {
-        crate::blur::gaussian_blur_planes(
-            &mut [r, g, b],
-            width,
-            height,
-            mapping.blur_sigma_px as f32,
-        );
-        stats.clipped = par_chunks(r, g, b, |_, r, g, b| clip_chunk(r, g, b)).clipped;
-    }
-    stats
 }
 
 /// Samples per parallel work item.

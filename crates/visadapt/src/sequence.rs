@@ -14,8 +14,9 @@
 //! switch. The paper gives the levels and the last time of its two sequences; the
 //! intermediate times of [`Sequence::figure_12a`] and [`Sequence::figure_12b`] are ours.
 //!
-//! Memory does not grow with the number of frames: one rescaled copy of the scene and one
-//! display image are reused, and each frame is handed to the caller as soon as it is done.
+//! Memory does not grow with the number of frames: the scene, rescaled in place
+//! ([`render_owned`]; [`render`] works on a copy), and one display image are reused, and
+//! each frame is handed to the caller as soon as it is done.
 
 use crate::adaptation::highest_visible;
 use crate::io::display::{png_error, to_srgb8};
@@ -114,28 +115,6 @@ pub struct Frame<'a> {
     pub stats: PixelStats,
 }
 
-/// `out = scene × factor`, reusing `out`'s planes.
-fn scaled_into(scene: &HdrImage, factor: f64, out: &mut HdrImage) {
-    let f = factor as f32;
-    let copy = |src: &[f32], dst: &mut Vec<f32>| {
-        dst.clear();
-        dst.extend(src.iter().map(|v| v * f));
-    };
-    copy(&scene.x, &mut out.x);
-    copy(&scene.y, &mut out.y);
-    copy(&scene.z, &mut out.z);
-    match (&scene.scotopic, &mut out.scotopic) {
-        (Some(s), Some(o)) => copy(s, o),
-        (Some(s), o) => *o = Some(s.iter().map(|v| v * f).collect()),
-        (None, o) => *o = None,
-    }
-    out.width = scene.width;
-    out.height = scene.height;
-    out.view = scene.view;
-    out.absolute_units = true;
-    out.adopted_white = scene.adopted_white;
-}
-
 /// Render a [`Sequence`] of `scene` (any units: it is rescaled to each level), calling
 /// `on_frame` for each frame as soon as it is done (frame 0 first). Stops at the first
 /// error, from the model or from `on_frame`.
@@ -159,6 +138,21 @@ pub fn render(
     scene: &HdrImage,
     sequence: &Sequence,
     conditions: &ViewingConditions,
+    on_frame: impl FnMut(&Frame<'_>) -> Result<()>,
+) -> Result<()> {
+    scene.check_consistent()?;
+    conditions.validate()?;
+    render_owned(scene.clone(), sequence, conditions, on_frame)
+}
+
+/// [`render`], consuming the scene: it is rescaled to each level in place (the second
+/// level from the first, one more rounding of each sample: at most 1 unit in the last place
+/// of f32) instead of into a copy, so that the working set is the scene and one display
+/// image (with glare, and a copy for the first level's veil).
+pub fn render_owned(
+    mut scene: HdrImage,
+    sequence: &Sequence,
+    conditions: &ViewingConditions,
     mut on_frame: impl FnMut(&Frame<'_>) -> Result<()>,
 ) -> Result<()> {
     scene.check_consistent()?;
@@ -176,31 +170,36 @@ pub fn render(
             "has no visible luminance to rescale",
         ));
     }
-    let mut lit = HdrImage::zeros(0, 0);
     let mut out = DisplayImage::default();
 
-    scaled_into(scene, sequence.from_cd_m2 / hv, &mut lit);
-    let (retina, before) = operator::prepare(&lit, conditions)?;
-    let mut eye = Adaptation::adapted(
-        before.world_adaptation_cd_m2,
-        before.world_adaptation_scotopic_cd_m2,
-    )?
-    .with_undershoot(conditions.undershoot);
-    let (mapping, stats) =
-        operator::apply_state_into(&retina, &before, &eye, conditions, &mut out)?;
-    drop(retina);
-    on_frame(&Frame {
-        index: 0,
-        t_seconds: None,
-        image: &out,
-        mapping,
-        adaptation: &eye,
-        report: &before,
-        stats,
-    })?;
+    scene.scale((sequence.from_cd_m2 / hv) as f32);
+    scene.absolute_units = true;
+    let mut eye = {
+        // With glare the veiled scene is a copy: the unveiled one is needed for the second
+        // level.
+        let (retina, before) = operator::prepare(&scene, conditions)?;
+        let eye = Adaptation::adapted(
+            before.world_adaptation_cd_m2,
+            before.world_adaptation_scotopic_cd_m2,
+        )?
+        .with_undershoot(conditions.undershoot);
+        let (mapping, stats) =
+            operator::apply_state_into(&retina, &before, &eye, conditions, &mut out)?;
+        drop(retina);
+        on_frame(&Frame {
+            index: 0,
+            t_seconds: None,
+            image: &out,
+            mapping,
+            adaptation: &eye,
+            report: &before,
+            stats,
+        })?;
+        eye
+    };
 
-    scaled_into(scene, sequence.to_cd_m2 / hv, &mut lit);
-    let (retina, after) = operator::prepare(&lit, conditions)?;
+    scene.scale((sequence.to_cd_m2 / sequence.from_cd_m2) as f32);
+    let (retina, after) = operator::prepare_owned(scene, conditions)?;
     eye.step_to(0.0, &after)?;
     let mut now = 0.0;
     for (i, &t) in sequence.times_seconds.iter().enumerate() {

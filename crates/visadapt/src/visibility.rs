@@ -605,19 +605,25 @@ pub fn tolerance_map(image: &HdrImage, viewer: &Viewer) -> Result<Vec<f32>> {
     let global = adaptation.global_gains();
     let local = adaptation.local_gains();
     let mut out = vec![0f32; n];
-    let mut v = vec![0f32; n];
-    par_chunks2(&mut out, &mut v, |start, out, v| {
-        accumulate(image, start, 1.0, out, v);
-        for (j, (o, v)) in out.iter_mut().zip(v.iter()).enumerate() {
-            let ratio = if *o > 0.0 {
-                v / *o
-            } else {
-                EQUAL_ENERGY_SP_RATIO as f32
-            };
-            let (cone, rod) = adaptation.gains_at(global, local.as_ref(), start + j);
-            *o = 1.0 / pool_f32(cone, rod * ratio);
+    // The scotopic luminance, a piece at a time (a plane of it would be 4 bytes per pixel).
+    const PIECE: usize = 1024;
+    par_chunks1(&mut out, |start, out| {
+        let mut v = [0f32; PIECE];
+        for (k, out) in out.chunks_mut(PIECE).enumerate() {
+            let start = start + k * PIECE;
+            let v = &mut v[..out.len()];
+            v.fill(0.0);
+            accumulate(image, start, 1.0, out, v);
+            for (j, (o, v)) in out.iter_mut().zip(v.iter()).enumerate() {
+                let ratio = if *o > 0.0 {
+                    v / *o
+                } else {
+                    EQUAL_ENERGY_SP_RATIO as f32
+                };
+                let (cone, rod) = adaptation.gains_at(global, local.as_ref(), start + j);
+                *o = 1.0 / pool_f32(cone, rod * ratio);
+            }
         }
-        0
     });
     Ok(out)
 }
@@ -643,20 +649,28 @@ impl ToleranceSummary {
         if tolerance.is_empty() || tolerance.len() != luminance_cd_m2.len() {
             return None;
         }
-        let mut sorted = tolerance.to_vec();
-        sorted.sort_unstable_by(f32::total_cmp);
-        let mut relative: Vec<f32> = tolerance
-            .iter()
-            .zip(luminance_cd_m2)
-            .filter(|(_, y)| y.is_finite() && **y > 0.0)
-            .map(|(t, y)| t / y)
-            .collect();
-        relative.sort_unstable_by(f32::total_cmp);
+        // One copy at a time (4 bytes per pixel), selected rather than sorted.
+        let upper_median = |mut v: Vec<f32>| {
+            let middle = v.len() / 2;
+            (!v.is_empty()).then(|| *v.select_nth_unstable_by(middle, f32::total_cmp).1)
+        };
+        let min_cd_m2 = tolerance.iter().copied().min_by(f32::total_cmp)?;
+        let max_cd_m2 = tolerance.iter().copied().max_by(f32::total_cmp)?;
+        let median_cd_m2 = upper_median(tolerance.to_vec())?;
+        // Sized once (a growing vector would hold two buffers while it moves).
+        let mut relative = Vec::with_capacity(tolerance.len());
+        relative.extend(
+            tolerance
+                .iter()
+                .zip(luminance_cd_m2)
+                .filter(|(_, y)| y.is_finite() && **y > 0.0)
+                .map(|(t, y)| t / y),
+        );
         Some(ToleranceSummary {
-            min_cd_m2: sorted[0],
-            median_cd_m2: sorted[sorted.len() / 2],
-            max_cd_m2: sorted[sorted.len() - 1],
-            median_relative: relative.get(relative.len() / 2).copied(),
+            min_cd_m2,
+            median_cd_m2,
+            max_cd_m2,
+            median_relative: upper_median(relative),
         })
     }
 }
@@ -741,6 +755,23 @@ fn summarise(jnd: &[f32]) -> (usize, f64, f32) {
 
 /// Samples per parallel work item.
 const CHUNK: usize = 1 << 14;
+
+/// Run `f(start, chunk)` over chunks of a plane, in parallel with the `rayon` feature.
+fn par_chunks1(a: &mut [f32], f: impl Fn(usize, &mut [f32]) + Sync) {
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        a.par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, a)| f(c * CHUNK, a));
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        a.chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, a)| f(c * CHUNK, a));
+    }
+}
 
 /// Run `f(start, a_chunk, b_chunk)` over matching chunks of two planes of the same length,
 /// in parallel with the `rayon` feature; sums `f`'s results.

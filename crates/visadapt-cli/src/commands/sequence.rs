@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use std::path::PathBuf;
 use visadapt::io;
 use visadapt::operator::ViewingConditions;
-use visadapt::sequence::{ApngWriter, Sequence, render};
+use visadapt::sequence::{ApngWriter, Sequence, render_owned};
 
 /// File name of frame `index` of `count`: `frame_000.png`, zero-padded to at least 3 digits.
 pub fn frame_name(index: usize, count: usize) -> String {
@@ -73,7 +73,7 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
     let mut white: Option<(String, Option<String>)> = None;
     // The file an error happened on, to name it in the message.
     let mut failed: Option<PathBuf> = None;
-    let result = render(&scene, &sequence, &conditions, |frame| {
+    let result = render_owned(scene, &sequence, &conditions, |frame| {
         let path = args.output.join(frame_name(frame.index, count));
         io::write_display(frame.image, &path, io::OutputFormat::Png { bits: 8 })
             .inspect_err(|_| failed = Some(path.clone()))?;

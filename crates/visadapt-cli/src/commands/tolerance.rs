@@ -45,7 +45,9 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
 
     let summary = ToleranceSummary::of(&tolerance, &image.y)
         .expect("one tolerance per pixel of a non-empty image");
-    write_luminance_exr(&args.output, image.width, image.height, tolerance)?;
+    let (width, height) = (image.width, image.height);
+    drop(image);
+    write_luminance_exr(&args.output, width, height, tolerance)?;
 
     let given = report.world_adaptation_source == Source::Caller;
     if args.json {

@@ -74,6 +74,7 @@
 //! [`HdrImage::view`]. Other tools keep or drop it as they do any unknown attribute.
 
 use crate::colour::{self, Chromaticities, Mat3, REC709};
+use crate::limits::saturating_f32;
 use crate::{DisplayImage, Error, HdrImage, Limits, Result};
 use exr::block::chunk::TileCoordinates;
 use exr::math::Vec2;
@@ -820,16 +821,6 @@ fn adopted_white(header: &Header, layout: &Layout) -> Option<colour::Xy> {
     colour::is_valid_white(white).then_some(white)
 }
 
-/// `v` as `f32`, saturating finite values at ±`f32::MAX` (Inf and NaN pass through).
-#[inline]
-fn saturate(v: f64) -> f32 {
-    if v.is_finite() {
-        v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
-    } else {
-        v as f32
-    }
-}
-
 /// Reconstruct a full-resolution chroma plane from one subsampled `sx × sy` (each 1 or 2)
 /// with OpenEXR's filter: samples sit on even pixels, odd pixels are interpolated.
 fn upsample_chroma(src: &[f32], w: usize, h: usize, sx: usize, sy: usize) -> Vec<f32> {
@@ -944,18 +935,18 @@ fn to_hdr(
             let l = planes.pop().unwrap_or_default();
             image.x = l
                 .iter()
-                .map(|&v| saturate(f64::from(v) * scale * wx))
+                .map(|&v| saturating_f32(f64::from(v) * scale * wx))
                 .collect();
             image.z = l
                 .iter()
-                .map(|&v| saturate(f64::from(v) * scale * wz))
+                .map(|&v| saturating_f32(f64::from(v) * scale * wz))
                 .collect();
             image.y = l;
             if scale != 1.0 {
                 image
                     .y
                     .iter_mut()
-                    .for_each(|v| *v = saturate(f64::from(*v) * scale));
+                    .for_each(|v| *v = saturating_f32(f64::from(*v) * scale));
             }
         }
         Layout::Rgb { r, g, b } => {

@@ -23,6 +23,7 @@
 //! [`encode`] writes colour (`PF`) little-endian PFM in linear Rec. 709.
 
 use crate::colour::{self, REC709};
+use crate::limits::saturating_f32;
 use crate::{Error, HdrImage, Limits, Result};
 
 /// Format name used in error messages.
@@ -58,15 +59,6 @@ fn dimension(t: &str) -> Result<u64> {
     }
     t.parse()
         .map_err(|_| Error::decode(FORMAT, format!("invalid dimension {t:?}")))
-}
-
-/// `v` as `f32`, saturating finite values at ±`f32::MAX` (Inf and NaN pass through).
-fn saturate(v: f64) -> f32 {
-    if v.is_finite() {
-        v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
-    } else {
-        v as f32
-    }
 }
 
 /// The header: channels, width, height, scale, and the offset of the first data byte.
@@ -150,9 +142,9 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
                 [l, l, l]
             };
             let xyz = colour::mul_vec(&m, rgb);
-            image.x[o] = saturate(xyz[0]);
-            image.y[o] = saturate(if channels == 1 { rgb[0] } else { xyz[1] });
-            image.z[o] = saturate(xyz[2]);
+            image.x[o] = saturating_f32(xyz[0]);
+            image.y[o] = saturating_f32(if channels == 1 { rgb[0] } else { xyz[1] });
+            image.z[o] = saturating_f32(xyz[2]);
         }
     }
     Ok(image)
@@ -174,7 +166,7 @@ pub fn encode(image: &HdrImage) -> Vec<u8> {
                 f64::from(image.z[i]),
             ];
             for v in colour::mul_vec(&m, xyz) {
-                out.extend_from_slice(&saturate(v).to_le_bytes());
+                out.extend_from_slice(&saturating_f32(v).to_le_bytes());
             }
         }
     }

@@ -34,6 +34,7 @@
 //! against [`Limits`]: every inconsistency or truncation is an [`Error::Decode`].
 
 use crate::colour::{self, Chromaticities, Mat3, RADIANCE_DEFAULT, Xy};
+use crate::limits::saturating_f32;
 use crate::{Error, HdrImage, Limits, Projection, Result, View};
 
 /// The format name used in errors and in [`Limits::check`].
@@ -793,10 +794,8 @@ impl Converter {
             (f64::from(g) + 0.5) * f,
             (f64::from(b) + 0.5) * f,
         ];
-        self.m.map(|row| {
-            let v = row[0] * c[0] + row[1] * c[1] + row[2] * c[2];
-            v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
-        })
+        self.m
+            .map(|row| saturating_f32(row[0] * c[0] + row[1] * c[1] + row[2] * c[2]))
     }
 }
 

@@ -100,26 +100,23 @@ pub fn varying_gaussian_blur(
     if levels.is_empty() {
         return;
     }
-    let sources: Vec<Vec<f32>> = planes.iter().map(|p| p.to_vec()).collect();
-    // The unblurred part: pixels not blurred keep their values, the others start at 0.
+    // One plane at a time: its unblurred copy and one blurred level beside it (8 bytes per
+    // pixel, instead of 8 per pixel and plane).
     for p in planes.iter_mut() {
+        let source = p.to_vec();
+        // The unblurred part: pixels not blurred keep their values, the others start at 0.
         for (v, &s) in p.iter_mut().zip(sigma_px) {
             if f64::from(s) >= MIN_BLUR_SIGMA_PX {
                 *v = 0.0;
             }
         }
-    }
-    let mut scratch: Vec<Vec<f32>> = sources.clone();
-    for (j, &sigma) in levels.iter().enumerate() {
-        for (s, src) in scratch.iter_mut().zip(&sources) {
-            s.copy_from_slice(src);
-        }
-        {
-            let mut views: Vec<&mut [f32]> = scratch.iter_mut().map(|v| v.as_mut_slice()).collect();
-            crate::blur::gaussian_blur_planes(&mut views, width, height, sigma);
-        }
-        for (p, s) in planes.iter_mut().zip(&scratch) {
-            accumulate(p, s, &levels, j, sigma_px);
+        let mut scratch = source.clone();
+        for (j, &sigma) in levels.iter().enumerate() {
+            if j > 0 {
+                scratch.copy_from_slice(&source);
+            }
+            crate::blur::gaussian_blur_planes(&mut [scratch.as_mut_slice()], width, height, sigma);
+            accumulate(p, &scratch, &levels, j, sigma_px);
         }
     }
 }

@@ -599,16 +599,23 @@ pub(crate) fn high_quantile(values: &[f64], fraction: f64) -> f64 {
     v[n - 1 - allowed.min(n - 1)]
 }
 
-/// Joint bilateral upsampling of grid `channels` to every pixel (module docs).
+/// Joint bilateral upsampling of grid `channels` to every pixel (module docs): one plane
+/// per channel, written in place row by row (no interleaved copy).
 fn upsample(image: &HdrImage, grid: &Grid, step: usize, channels: &[&[f32]]) -> Vec<Vec<f32>> {
     let (w, h) = (image.width, image.height);
     let n = w * h;
-    let k = channels.len();
     let (gw, gh) = (grid.width, grid.height);
     let inv_range = 1.0 / UPSAMPLING_RANGE_LOG;
-    // Interleaved output, one row of `w·k` values per image row.
-    let mut out = vec![0f32; n * k];
-    let row_fn = |y: usize, row: &mut [f32]| {
+    let mut planes: Vec<Vec<f32>> = channels.iter().map(|_| vec![0f32; n]).collect();
+    // Row `y` of every plane, so that rows can be filled in parallel.
+    let mut rows: Vec<Vec<&mut [f32]>> =
+        (0..h).map(|_| Vec::with_capacity(channels.len())).collect();
+    for plane in planes.iter_mut() {
+        for (row, r) in rows.iter_mut().zip(plane.chunks_mut(w)) {
+            row.push(r);
+        }
+    }
+    let row_fn = |y: usize, row: &mut [&mut [f32]]| {
         let mut lp = vec![0f32; w];
         let mut ls = vec![0f32; w];
         log_luminances(image, y * w, &mut lp, &mut ls);
@@ -617,7 +624,7 @@ fn upsample(image: &HdrImage, grid: &Grid, step: usize, channels: &[&[f32]]) -> 
         let y0 = (fy as usize).min(gh - 1);
         let y1 = (y0 + 1).min(gh - 1);
         let ty = fy - y0 as f32;
-        for (x, px) in row.chunks_exact_mut(k).enumerate() {
+        for x in 0..w {
             let fx = ((x as f32 + 0.5) / step as f32 - 0.5).clamp(0.0, (gw - 1) as f32);
             let x0 = (fx as usize).min(gw - 1);
             let x1 = (x0 + 1).min(gw - 1);
@@ -638,34 +645,32 @@ fn upsample(image: &HdrImage, grid: &Grid, step: usize, channels: &[&[f32]]) -> 
                 *wq = b * range * range;
                 sw += *wq;
             }
-            for (o, c) in px.iter_mut().zip(channels) {
+            for (out, c) in row.iter_mut().zip(channels) {
                 let b = c[base];
                 let mut s = 0f32;
                 for (wq, (q, _)) in weights.iter().zip(taps) {
                     s += wq * (c[q] - b);
                 }
                 // A sum of differences from the first tap: equal taps give it exactly.
-                *o = b + s / sw;
+                out[x] = b + s / sw;
             }
         }
     };
     #[cfg(feature = "rayon")]
     {
         use rayon::prelude::*;
-        out.par_chunks_mut(w * k)
+        rows.par_iter_mut()
             .enumerate()
             .for_each(|(y, row)| row_fn(y, row));
     }
     #[cfg(not(feature = "rayon"))]
     {
-        for (y, row) in out.chunks_mut(w * k).enumerate() {
+        for (y, row) in rows.iter_mut().enumerate() {
             row_fn(y, row);
         }
     }
-    // De-interleave.
-    (0..k)
-        .map(|c| out.iter().skip(c).step_by(k).copied().collect())
-        .collect()
+    drop(rows);
+    planes
 }
 
 #[cfg(test)]

@@ -299,67 +299,120 @@ pub fn apply_into(
     mapping: &LocalMapping,
     out: &mut DisplayImage,
 ) -> PixelStats {
-    let n = image.len();
     assert_eq!((map.width, map.height), (image.width, image.height));
-    out.width = image.width;
-    out.height = image.height;
-    out.display_max_cd_m2 = mapping.display_max_cd_m2 as f32;
-    for plane in [&mut out.r, &mut out.g, &mut out.b] {
-        plane.resize(n, 0.0);
-    }
-    let DisplayImage { r, g, b, .. } = out;
-    let blur = map
-        .acuity_sigma_px
-        .as_ref()
-        .filter(|s| s.iter().any(|&v| v > 0.0));
-    let mut stats = operator::par_chunks(r, g, b, |start, r, g, b| {
-        let mut s = map_chunk(image, map, mapping, start, r, g, b);
-        if blur.is_none() {
-            s.clipped = operator::clip_chunk(r, g, b).clipped;
-        }
-        s
+    let (width, height) = (image.width, image.height);
+    let [r, g, b] = operator::display_planes(out, width, height, mapping.display_max_cd_m2);
+    let blur = acuity_blur(map, width, height);
+    let stats = operator::map_pass(r, g, b, blur.is_none(), |start, r, g, b| {
+        let end = start + r.len();
+        let xyz = [
+            &image.x[start..end],
+            &image.y[start..end],
+            &image.z[start..end],
+        ];
+        let scotopic = image.scotopic.as_ref().map(|s| &s[start..end]);
+        let offsets = [
+            &map.offset_log[start..end],
+            &map.offset_scotopic_log[start..end],
+        ];
+        map_chunk(mapping, xyz, scotopic, offsets, r, g, b)
     });
-    if let Some(sigma) = blur {
-        acuity::varying_gaussian_blur(
-            &mut [r.as_mut_slice(), g.as_mut_slice(), b.as_mut_slice()],
-            image.width,
-            image.height,
-            sigma,
-        );
-        stats.clipped =
-            operator::par_chunks(r, g, b, |_, r, g, b| operator::clip_chunk(r, g, b)).clipped;
-    }
-    stats
+    operator::blur_and_clip(stats, r, g, b, blur)
 }
 
-fn map_chunk(
-    image: &HdrImage,
+/// [`apply_into`], consuming the image: the display is written over its X, Y, Z planes
+/// (as [`operator::apply_owned`] does for the global mapping), so that no second image is
+/// allocated. Same result as [`apply_into`], bit for bit.
+///
+/// # Panics
+/// As [`apply_into`].
+pub fn apply_owned(
+    image: HdrImage,
     map: &AdaptationMap,
     mapping: &LocalMapping,
-    start: usize,
+) -> (DisplayImage, PixelStats) {
+    assert_eq!((map.width, map.height), (image.width, image.height));
+    image
+        .check_consistent()
+        .expect("an image with consistent planes");
+    let HdrImage {
+        width,
+        height,
+        x: mut r,
+        y: mut g,
+        z: mut b,
+        scotopic,
+        ..
+    } = image;
+    let blur = acuity_blur(map, width, height);
+    let stats = operator::map_pass(&mut r, &mut g, &mut b, blur.is_none(), |start, r, g, b| {
+        let end = start + r.len();
+        let s = scotopic.as_ref().map(|s| &s[start..end]);
+        let (dp, ds) = (
+            &map.offset_log[start..end],
+            &map.offset_scotopic_log[start..end],
+        );
+        operator::map_in_place(r, g, b, |lo, xyz, or, og, ob| {
+            let hi = lo + or.len();
+            let s = s.map(|s| &s[lo..hi]);
+            map_chunk(mapping, xyz, s, [&dp[lo..hi], &ds[lo..hi]], or, og, ob)
+        })
+    });
+    drop(scotopic);
+    let stats = operator::blur_and_clip(stats, &mut r, &mut g, &mut b, blur);
+    let display = DisplayImage {
+        width,
+        height,
+        r,
+        g,
+        b,
+        display_max_cd_m2: mapping.display_max_cd_m2 as f32,
+    };
+    (display, stats)
+}
+
+/// The acuity stage of a local mapping: the Eq. 7 Gaussian at each pixel's own sigma, or
+/// `None` when the map has none (or all are 0).
+fn acuity_blur(
+    map: &AdaptationMap,
+    width: usize,
+    height: usize,
+) -> Option<impl FnOnce(&mut [&mut [f32]]) + '_> {
+    map.acuity_sigma_px
+        .as_deref()
+        .filter(|s| s.iter().any(|&v| v > 0.0))
+        .map(|sigma| {
+            move |planes: &mut [&mut [f32]]| {
+                acuity::varying_gaussian_blur(planes, width, height, sigma)
+            }
+        })
+}
+
+/// The local mapping of the pixels of `xyz` (and their `scotopic` samples and
+/// `[photopic, scotopic]` map offsets) into `r`, `g`, `b`.
+fn map_chunk(
+    mapping: &LocalMapping,
+    [xs, ys, zs]: [&[f32]; 3],
+    scotopic: Option<&[f32]>,
+    [dp, ds]: [&[f32]; 2],
     r: &mut [f32],
     g: &mut [f32],
     b: &mut [f32],
 ) -> PixelStats {
-    let end = start + r.len();
     let (mut non_finite, mut negative, mut saturated) = (0usize, 0usize, 0usize);
     let saturation = if mapping.rod_saturation {
         ROD_SATURATION_SCOTOPIC_CD_M2
     } else {
         f32::INFINITY
     };
-    let (dp, ds) = (
-        &map.offset_log[start..end],
-        &map.offset_scotopic_log[start..end],
-    );
-    for (j, i) in (start..end).enumerate() {
-        let s = image.scotopic.as_ref().map_or(0.0, |s| s[i]);
-        let (finite, neg, v) = operator::sanitize([image.x[i], image.y[i], image.z[i], s]);
+    for j in 0..r.len() {
+        let s = scotopic.map_or(0.0, |s| s[j]);
+        let (finite, neg, v) = operator::sanitize([xs[j], ys[j], zs[j], s]);
         let (sat, [x, y, z, s]) = operator::saturate(v, mapping.max_input);
         non_finite += usize::from(!finite);
         negative += usize::from(neg);
         saturated += usize::from(sat);
-        let v = match &image.scotopic {
+        let v = match scotopic {
             Some(_) => s,
             None => scotopic::from_xyz(x, y, z),
         };
