@@ -110,6 +110,11 @@ use crate::{Error, HdrImage, Result};
 /// 1989, p. 165).
 pub const POOLING_EXPONENT: f64 = 3.5;
 
+/// Differences up to this (cd/m²) go through the acuity blur as they are; larger ones are
+/// scaled down by a power of two first (2^100, far above any real scene and far below
+/// the f32 range the blur's sums need).
+const SAFE_DIFFERENCE: f32 = 1.267_650_6e30;
+
 /// A difference is visible from this many JNDs on (the threshold itself).
 pub const VISIBLE_JND: f32 = 1.0;
 
@@ -157,13 +162,21 @@ impl Sensitivity {
         }
     }
 
-    /// Check that both thresholds are positive and finite and `k` is in [0, 1].
+    /// Check that both thresholds are positive and at most `f32::MAX` (the range of the
+    /// planes they divide; an image's own adaptation can reach it, e.g. values of 1e38
+    /// cd/m²) and `k` is in [0, 1].
     pub fn validate(&self) -> Result<()> {
         for (name, v) in [
             ("cone-threshold", self.cone_threshold_cd_m2),
             ("rod-threshold", self.rod_threshold_scotopic_cd_m2),
         ] {
-            crate::check_luminance(name, v)?;
+            if !(v > 0.0 && v <= f64::from(f32::MAX)) {
+                return Err(Error::invalid(
+                    name,
+                    v,
+                    "must be a positive threshold of at most 3.4e38 (the f32 planes' range)",
+                ));
+            }
         }
         if !(0.0..=1.0).contains(&self.rod_weight) {
             return Err(Error::invalid(
@@ -195,11 +208,13 @@ impl Sensitivity {
         )
     }
 
-    /// Per-unit sensitivities `(1/t_p, k/t_s)` as f32, the form the pixel loops use.
+    /// Per-unit sensitivities `(1/t_p, k/t_s)` as f32, the form the pixel loops use
+    /// (at most `f32::MAX`: finite for any valid threshold).
     fn gains(&self) -> (f32, f32) {
+        let f = |v: f64| v.min(f64::from(f32::MAX)) as f32;
         (
-            (1.0 / self.cone_threshold_cd_m2) as f32,
-            (self.rod_weight / self.rod_threshold_scotopic_cd_m2) as f32,
+            f(1.0 / self.cone_threshold_cd_m2),
+            f(self.rod_weight / self.rod_threshold_scotopic_cd_m2),
         )
     }
 }
@@ -537,6 +552,18 @@ pub fn difference(reference: &HdrImage, test: &HdrImage, viewer: &Viewer) -> Res
     let non_finite = par_chunks2(&mut dy, &mut dv, |start, dy, dv| {
         accumulate(reference, start, -1.0, dy, dv) + accumulate(test, start, 1.0, dy, dv)
     });
+    // Huge finite differences (an image of 1e38 cd/m²) would overflow inside the blur (its
+    // kernels add pairs of samples and run on deviations): scale them by an exact power of
+    // two into range, and the sensitivities up by the same factor (the blur is linear).
+    let largest = dy.iter().chain(dv.iter()).fold(0f32, |m, v| m.max(v.abs()));
+    let up = if largest > SAFE_DIFFERENCE {
+        let e = (largest / SAFE_DIFFERENCE).log2().ceil() as i32;
+        let down = 2f32.powi(-e);
+        dy.iter_mut().chain(dv.iter_mut()).for_each(|v| *v *= down);
+        2f32.powi(e)
+    } else {
+        1.0
+    };
     match &viewer.adaptation {
         Adaptation::Local(AdaptationMap {
             acuity_sigma_px: Some(sigma),
@@ -563,7 +590,9 @@ pub fn difference(reference: &HdrImage, test: &HdrImage, viewer: &Viewer) -> Res
     par_chunks2(&mut dy, &mut dv, |start, dy, dv| {
         for (j, (d, v)) in dy.iter_mut().zip(dv.iter()).enumerate() {
             let (cone, rod) = adaptation.gains_at(global, local.as_ref(), start + j);
-            *d = pool_f32(d.abs() * cone, v.abs() * rod);
+            let (cone, rod) = ((cone * up).min(f32::MAX), (rod * up).min(f32::MAX));
+            // JNDs beyond f32's range saturate at f32::MAX.
+            *d = pool_f32(d.abs() * cone, v.abs() * rod).min(f32::MAX);
         }
         0
     });

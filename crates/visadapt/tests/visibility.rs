@@ -659,3 +659,55 @@ fn full_contrast_grating_at_the_cutoff_is_one_jnd_from_001_to_1e4_cd_m2() {
     }
     assert_eq!(levels, 25);
 }
+
+/// Issue 8: `visible` on WideFloatRange.exr (values from 6e-39 to 1.9e38, half negative)
+/// against a black image gave NaN JNDs with local adaptation (the acuity blur overflowed on
+/// differences of 1e38) and, globally or with glare, refused the observer ("invalid
+/// cone-threshold 3.3e36"). Finite input must give finite JNDs in every mode.
+#[test]
+fn wide_float_range_gives_finite_jnds_in_every_mode() {
+    use visadapt::operator::AdaptationMode;
+    let Some(path) = common::shared("openexr/WideFloatRange.exr") else {
+        return;
+    };
+    let reference = io::read(&path, &Limits::default()).unwrap();
+    let mut black = reference.clone();
+    for p in [&mut black.x, &mut black.y, &mut black.z] {
+        p.fill(0.0);
+    }
+    black.scotopic = None;
+    for local in [false, true] {
+        for glare in [false, true] {
+            let conditions = ViewingConditions {
+                view: Some(View::perspective(60.0, reference.width, reference.height)),
+                adaptation: if local {
+                    AdaptationMode::Local(Default::default())
+                } else {
+                    AdaptationMode::Global
+                },
+                glare: glare.then(visadapt::glare::Glare::default),
+                ..Default::default()
+            };
+            let (d, _) = visadapt::visibility::compare(&reference, &black, &conditions)
+                .unwrap_or_else(|e| panic!("local {local}, glare {glare}: {e}"));
+            let bad = d.jnd.iter().filter(|v| !v.is_finite()).count();
+            assert_eq!(
+                bad, 0,
+                "local {local}, glare {glare}: {bad} non-finite JNDs"
+            );
+            assert!(d.mean_jnd.is_finite() && d.max_jnd.is_finite());
+            // The brightest pixels (1.9e38 against black) are clearly visible.
+            assert!(
+                d.max_jnd > 1.0,
+                "local {local}, glare {glare}: {}",
+                d.max_jnd
+            );
+            println!(
+                "local {local}, glare {glare}: max {:.3e} JND, mean {:.3e}, {:.1} % visible",
+                d.max_jnd,
+                d.mean_jnd,
+                100.0 * d.visible_fraction
+            );
+        }
+    }
+}
