@@ -879,10 +879,16 @@ const VIDEO_EXAMPLES: &str = "\
 Examples:
   visadapt video 'render/f_%04d.exr' --fps 24 -o out/
   visadapt video 'frames/shot%d.hdr' --fps 30 --scale 179 --format exr -o mapped/ --json
+  ffmpeg -i 'render/f_%04d.exr' -f rawvideo -pix_fmt gbrpf32le - |
+    visadapt video - --size 1920x1080 --fps 24 --scale 100 -o - --format rgb48le |
+    ffmpeg -f rawvideo -pix_fmt rgb48le -s 1920x1080 -r 24 -i - -pix_fmt yuv420p out.mp4
 
 IN_PATTERN holds one %d or %0Nd (printf style, as ffmpeg); the frames are the files it names, in
 numerical order, consecutive. The observer starts adapted to the first frame. Output frames are
-OUT_DIR/<input name>.<format>, each written as soon as it is done.";
+OUT_DIR/<input name>.<format>, each written as soon as it is done. With - as input, frames are
+raw gbrpf32le (planes G, B, R of little-endian floats, linear Rec. 709, relative: give --scale)
+of --size, until the stream ends; with -o -, raw rgb48le or rgb24 frames go to standard output
+and the progress and report to standard error.";
 
 #[derive(Debug, Args)]
 pub struct TimecourseArgs {
@@ -973,11 +979,36 @@ pub enum VideoFormat {
     Jpg,
     /// Linear display-referred OpenEXR (1.0 = --display-max).
     Exr,
+    /// Raw interleaved 16-bit little-endian sRGB, the 16-bit PNG's codes (-o - only).
+    Rgb48le,
+    /// Raw interleaved 8-bit sRGB, the 8-bit PNG's codes (-o - only).
+    Rgb24,
+}
+
+impl VideoFormat {
+    /// The raw stream format, for `-o -`; `None` for the file formats.
+    pub fn raw(self) -> Option<visadapt::io::raw::RawFormat> {
+        use visadapt::io::raw::RawFormat;
+        match self {
+            VideoFormat::Rgb48le => Some(RawFormat::Rgb48le),
+            VideoFormat::Rgb24 => Some(RawFormat::Rgb24),
+            VideoFormat::Png | VideoFormat::Jpg | VideoFormat::Exr => None,
+        }
+    }
+}
+
+/// A frame size, `WxH` (e.g. `1920x1080`).
+fn frame_size(s: &str) -> Result<(u64, u64), String> {
+    let bad = || format!("{s}: a frame size is WIDTHxHEIGHT, e.g. 1920x1080");
+    let (w, h) = s.trim().split_once(['x', 'X']).ok_or_else(bad)?;
+    let side = |v: &str| v.parse::<u64>().ok().filter(|&v| v > 0).ok_or_else(bad);
+    Ok((side(w)?, side(h)?))
 }
 
 #[derive(Debug, Args)]
 pub struct VideoArgs {
-    /// Input frames: a path whose file name holds one %d or %0Nd, e.g. frames/f_%04d.exr.
+    /// Input frames: a path whose file name holds one %d or %0Nd, e.g. frames/f_%04d.exr;
+    /// or - for raw gbrpf32le frames on standard input (needs --size).
     #[arg(value_name = "IN_PATTERN")]
     pub pattern: String,
 
@@ -985,7 +1016,16 @@ pub struct VideoArgs {
     #[arg(long, value_name = "F", allow_negative_numbers = true, value_parser = positive)]
     pub fps: f64,
 
-    /// Output directory (created if missing).
+    /// Size of the raw frames on standard input (input -), e.g. 1920x1080.
+    #[arg(long, value_name = "WxH", value_parser = frame_size)]
+    pub size: Option<(u64, u64)>,
+
+    /// Stop after N frames (the first N of the pattern or of the stream).
+    #[arg(long, value_name = "N")]
+    pub max_frames: Option<u64>,
+
+    /// Output directory (created if missing), or - for raw frames on standard output
+    /// (--format rgb48le or rgb24).
     #[arg(short, long, value_name = "OUT_DIR")]
     pub output: PathBuf,
 

@@ -111,12 +111,17 @@ impl fmt::Display for LimitsExceeded {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
-    /// A [`Error::Decode`] for `format` with a reason.
+    /// A [`Error::Decode`] for `format` with a reason, folded to one line: runs of
+    /// whitespace (newlines included) become one space and the ends are trimmed, so that
+    /// a foreign decoder's message (some end in a newline or span several lines) makes a
+    /// one-line error.
     pub fn decode(format: &'static str, reason: impl Into<String>) -> Self {
-        Error::Decode {
-            format,
-            reason: reason.into(),
-        }
+        let reason = reason
+            .into()
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ");
+        Error::Decode { format, reason }
     }
 
     /// An [`Error::InvalidParameter`].
@@ -140,5 +145,27 @@ impl Error {
         } else {
             Error::Io(e)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decode_errors_are_one_line() {
+        let e = Error::decode("JPEG", "No more bytes\n\tat offset 12\r\n  ");
+        assert_eq!(
+            e.to_string(),
+            "invalid JPEG data: No more bytes at offset 12"
+        );
+        let e = Error::decode("PNG", "  two  spaces\u{2028}and a separator");
+        assert_eq!(
+            e.to_string(),
+            "invalid PNG data: two spaces and a separator"
+        );
+        // A message that is one line already is kept as it is.
+        let e = Error::decode("PFM", "invalid scale \"x\"");
+        assert_eq!(e.to_string(), "invalid PFM data: invalid scale \"x\"");
     }
 }

@@ -258,6 +258,38 @@ impl DisplayImage {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+
+    /// Check what every display writer needs (PNG, JPEG, OpenEXR, TIFF, Radiance, raw
+    /// frames): a non-empty image whose three planes hold `width × height` samples, and a
+    /// positive, finite [`display_max_cd_m2`](Self::display_max_cd_m2).
+    ///
+    /// ```
+    /// use visadapt::DisplayImage;
+    /// let mut image = DisplayImage { width: 2, height: 1, r: vec![0.5; 2], g: vec![0.5; 2],
+    ///                                b: vec![0.5; 2], display_max_cd_m2: 100.0 };
+    /// assert!(image.validate().is_ok());
+    /// image.b.pop();
+    /// assert!(image.validate().is_err());
+    /// ```
+    pub fn validate(&self) -> crate::Result<()> {
+        let n = self.width.checked_mul(self.height).unwrap_or(0);
+        if n == 0 || [&self.r, &self.g, &self.b].iter().any(|p| p.len() != n) {
+            return Err(crate::Error::invalid(
+                "image",
+                format!("{}x{}", self.width, self.height),
+                "planes must be non-empty and hold width*height samples",
+            ));
+        }
+        let l = self.display_max_cd_m2;
+        if !(l.is_finite() && l > 0.0) {
+            return Err(crate::Error::invalid(
+                "display-max",
+                l,
+                "must be a positive, finite luminance in cd/m²",
+            ));
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -12,6 +12,12 @@
 //! the frame is mapped with the state's Eq. 8–9 mapping. Each output frame is written,
 //! atomically, as soon as it is done, to `OUT_DIR/<input stem>.<format>`.
 //!
+//! Pipes (ffmpeg's raw video, [`visadapt::io::raw`]): input `-` reads raw `gbrpf32le`
+//! frames of `--size WxH` from standard input until the stream ends (or `--max-frames`),
+//! numbered from 0 (to `OUT_DIR/frame_000000.<format>`, ...); `-o -` writes raw `rgb48le`
+//! or `rgb24` frames to standard output, and the progress bar and the report then go to
+//! standard error.
+//!
 //! The work is a pipeline of three threads joined by bounded queues: a reader decodes
 //! frame n+1 while the operator maps frame n and a writer encodes and writes frame n−1.
 //! The operator is one thread, so the state is stepped in frame order; the output is the
@@ -23,8 +29,10 @@
 use crate::cli::{VideoArgs, VideoFormat};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
+use visadapt::io::raw::{FrameReader, RawFormat};
 use visadapt::io::{self, OutputFormat};
 use visadapt::operator::{self, ViewingConditions};
 use visadapt::timecourse::Adaptation;
@@ -136,12 +144,92 @@ impl Pattern {
     }
 }
 
+/// Where the frames come from.
+enum Source {
+    /// Numbered files, `(number, path)` in order.
+    Files(Vec<(u64, PathBuf)>),
+    /// Raw `gbrpf32le` frames of this size on standard input.
+    Stream { width: u64, height: u64 },
+}
+
+/// Where the mapped frames go.
+#[derive(Clone, Copy)]
+enum Sink<'a> {
+    /// Files `dir/<input stem>.<ext>`.
+    Folder {
+        dir: &'a Path,
+        format: OutputFormat,
+        ext: &'static str,
+    },
+    /// Raw frames on standard output.
+    Stream(RawFormat),
+}
+
+impl Sink<'_> {
+    /// The file frame `n` from `input` goes to: `<input stem>.<ext>`, or
+    /// `frame_<n, 6 digits>.<ext>` for a frame of standard input (`-`); `None` on a stream.
+    fn path(&self, input: &Path, n: u64) -> Option<PathBuf> {
+        match self {
+            Sink::Folder { dir, ext, .. } if input.as_os_str() == "-" => {
+                Some(dir.join(format!("frame_{n:06}.{ext}")))
+            }
+            Sink::Folder { dir, ext, .. } => Some(
+                dir.join(input.file_stem().unwrap_or_default())
+                    .with_extension(ext),
+            ),
+            Sink::Stream(_) => None,
+        }
+    }
+}
+
+/// The name of standard input in messages.
+const STDIN: &str = "standard input";
+
 pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     if !(args.fps.is_finite() && args.fps > 0.0) {
         bail!(
             "invalid --fps {}: must be a positive, finite number of frames per second",
             args.fps
         );
+    }
+    let stdin = args.pattern == "-";
+    let stdout = args.output.as_os_str() == "-";
+    let source = match (stdin, args.size) {
+        (true, Some((width, height))) => Source::Stream { width, height },
+        (true, None) => bail!(
+            "input - (raw gbrpf32le frames on standard input) needs --size WxH, e.g. --size 1920x1080"
+        ),
+        (false, Some(_)) => bail!(
+            "--size is for raw frames on standard input (input -); {} names files, whose size is in them",
+            args.pattern
+        ),
+        (false, None) => Source::Files(Pattern::parse(&args.pattern)?.frames(&args.pattern)?),
+    };
+    let sink = match (stdout, args.format.raw()) {
+        (true, Some(raw)) => Sink::Stream(raw),
+        (true, None) => bail!(
+            "-o - (standard output) carries raw frames: use --format rgb48le or --format rgb24"
+        ),
+        (false, Some(raw)) => bail!(
+            "--format {} is a raw stream for -o - (standard output), not for files in {}",
+            raw.pix_fmt(),
+            args.output.display()
+        ),
+        (false, None) => {
+            let (format, ext) = match args.format {
+                VideoFormat::Jpg => (OutputFormat::Jpeg { quality: 90 }, "jpg"),
+                VideoFormat::Exr => (OutputFormat::Exr, "exr"),
+                _ => (OutputFormat::Png { bits: 8 }, "png"),
+            };
+            Sink::Folder {
+                dir: &args.output,
+                format,
+                ext,
+            }
+        }
+    };
+    if stdout && args.json {
+        bail!("--json prints on standard output, which carries the frames with -o -");
     }
     let conditions = ViewingConditions {
         undershoot: args.time_course.undershoot(),
@@ -153,56 +241,77 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         )
     };
     conditions.validate()?;
-    let (format, ext) = match args.format {
-        VideoFormat::Png => (OutputFormat::Png { bits: 8 }, "png"),
-        VideoFormat::Jpg => (OutputFormat::Jpeg { quality: 90 }, "jpg"),
-        VideoFormat::Exr => (OutputFormat::Exr, "exr"),
-    };
-    let pattern = Pattern::parse(&args.pattern)?;
-    let frames = pattern.frames(&args.pattern)?;
-    let out_path = |input: &Path| {
-        let stem = input.file_stem().unwrap_or_default();
-        args.output.join(stem).with_extension(ext)
+    let limits = args.limits.limits();
+    let (frames, total) = match &source {
+        Source::Files(frames) => {
+            let take = args.max_frames.map_or(frames.len(), |m| {
+                frames.len().min(usize::try_from(m).unwrap_or(usize::MAX))
+            });
+            (&frames[..take], Some(take as u64))
+        }
+        Source::Stream { width, height } => {
+            // The size is checked before anything is read or allocated.
+            FrameReader::new(std::io::empty(), STDIN, *width, *height, &limits)?;
+            (&[][..], args.max_frames)
+        }
     };
     // Never overwrite an input frame (under any name: every output against every input).
     let inputs: Vec<&Path> = frames.iter().map(|(_, p)| p.as_path()).collect();
-    for (_, input) in &frames {
-        io::output::refuse_same_file(&out_path(input), &inputs)?;
+    for (n, input) in frames {
+        if let Some(out) = sink.path(input, *n) {
+            io::output::refuse_same_file(&out, &inputs)?;
+        }
     }
-    std::fs::create_dir_all(&args.output).with_context(|| {
-        format!(
-            "{}: cannot create the output directory",
-            args.output.display()
-        )
-    })?;
+    if !stdout {
+        std::fs::create_dir_all(&args.output).with_context(|| {
+            format!(
+                "{}: cannot create the output directory",
+                args.output.display()
+            )
+        })?;
+    }
 
-    let limits = args.limits.limits();
     let dt = 1.0 / args.fps;
-    let progress = ProgressBar::new(frames.len() as u64).with_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}").expect("valid template"),
-    );
+    let progress = match total {
+        Some(n) => ProgressBar::new(n).with_style(
+            ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}")
+                .expect("valid template"),
+        ),
+        None => ProgressBar::new_spinner().with_style(
+            ProgressStyle::with_template("{spinner} {pos} frames {per_sec}")
+                .expect("valid template"),
+        ),
+    };
     // Three stages overlap: the reader decodes frame n+1 while the operator maps frame n and
     // the writer encodes frame n-1. The operator stays one thread, in frame order, because
     // the adaptation state is stepped from each frame to the next.
-    let (to_operator, decoded) = mpsc::sync_channel::<anyhow::Result<HdrImage>>(QUEUE);
+    let (to_operator, decoded) = mpsc::sync_channel::<anyhow::Result<Decoded>>(QUEUE);
     let (free_hdr, reused_hdr) = mpsc::channel::<HdrImage>();
     let (to_writer, mapped) = mpsc::sync_channel::<Mapped>(QUEUE);
     let (free_display, reused_display) = mpsc::channel::<DisplayImage>();
-    std::thread::scope(|s| {
-        let frames = &frames;
-        s.spawn(move || read_frames(frames, &limits, &to_operator, &reused_hdr));
+    let written = std::thread::scope(|s| {
+        let source = &source;
+        s.spawn(move || match source {
+            Source::Files(_) => read_files(frames, &limits, &to_operator, &reused_hdr),
+            Source::Stream { width, height } => read_stream(
+                (*width, *height),
+                args.max_frames,
+                &limits,
+                &to_operator,
+                &reused_hdr,
+            ),
+        });
         let writer = s.spawn({
             let progress = progress.clone();
-            move || write_frames(&mapped, &free_display, format, &progress)
+            move || write_frames(&mapped, &free_display, sink, &progress)
         });
         let operated = map_frames(
             &args,
             &conditions,
-            frames,
             dt,
-            &out_path,
             (&decoded, &free_hdr),
             (&to_writer, &reused_display),
+            sink,
         );
         // No more frames for the writer: it finishes those it has, then ends.
         drop(to_writer);
@@ -210,13 +319,31 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         let written = writer.join().expect("the writer thread does not panic");
         // The writer's error is for an earlier frame than the operator's (a frame reaches
         // the writer only after the operator is done with it): report the first one.
-        written.and(operated)
+        let written = written?;
+        operated.map(|()| written)
     })?;
     progress.finish_and_clear();
     if !args.json {
-        println!("wrote {} frames to {}", frames.len(), args.output.display());
+        let report = format!("wrote {} to {}", frames_phrase(written), {
+            if stdout {
+                "standard output".to_string()
+            } else {
+                args.output.display().to_string()
+            }
+        });
+        // Standard output carries the frames with -o -: the report goes to standard error.
+        if stdout {
+            eprintln!("{report}");
+        } else {
+            println!("{report}");
+        }
     }
     Ok(())
+}
+
+/// `1 frame`, `2 frames`.
+fn frames_phrase(n: u64) -> String {
+    format!("{n} frame{}", if n == 1 { "" } else { "s" })
 }
 
 /// Frames each queue between two stages holds beyond the one handed over: none. A stage
@@ -227,21 +354,31 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
 /// peak memory (168 against 121 MiB on Radiance frames).
 const QUEUE: usize = 0;
 
+/// A decoded frame on its way to the operator.
+struct Decoded {
+    /// The frame's number (in the file name, or from 0 on a stream).
+    n: u64,
+    /// The file it came from (`-` for standard input).
+    input: PathBuf,
+    hdr: HdrImage,
+}
+
 /// A mapped frame on its way to the writer.
 struct Mapped {
     display: DisplayImage,
-    path: PathBuf,
+    /// The file it goes to (`None` on a stream).
+    path: Option<PathBuf>,
     /// The frame's JSON line, printed once the file is written (`--json`).
     json: Option<String>,
 }
 
-/// The reader: decode every frame in order, into images the operator hands back, and pass
-/// each on (or the first error, naming the frame, then stop). Ends early when the
-/// operator stops listening.
-fn read_frames(
+/// The reader of numbered files: decode every frame in order, into images the operator
+/// hands back, and pass each on (or the first error, naming the frame, then stop). Ends
+/// early when the operator stops listening.
+fn read_files(
     frames: &[(u64, PathBuf)],
     limits: &visadapt::Limits,
-    to_operator: &mpsc::SyncSender<anyhow::Result<HdrImage>>,
+    to_operator: &mpsc::SyncSender<anyhow::Result<Decoded>>,
     reused: &mpsc::Receiver<HdrImage>,
 ) {
     let mut bytes = Vec::new();
@@ -250,32 +387,87 @@ fn read_frames(
         let read = io::read_into(input, limits, &mut bytes, &mut hdr)
             .with_context(|| format!("frame {n} ({})", input.display()));
         let failed = read.is_err();
-        if to_operator.send(read.map(|()| hdr)).is_err() || failed {
+        let frame = read.map(|()| Decoded {
+            n: *n,
+            input: input.clone(),
+            hdr,
+        });
+        if to_operator.send(frame).is_err() || failed {
             return;
         }
     }
 }
 
-/// The writer: write every mapped frame, atomically and in order, then hand its image back
-/// to the operator. Stops at the first error (the operator then stops too, as its next
-/// frame finds no writer).
+/// The reader of raw frames on standard input: as [`read_files`], until the stream ends
+/// or `max_frames` have been read.
+fn read_stream(
+    (width, height): (u64, u64),
+    max_frames: Option<u64>,
+    limits: &visadapt::Limits,
+    to_operator: &mpsc::SyncSender<anyhow::Result<Decoded>>,
+    reused: &mpsc::Receiver<HdrImage>,
+) {
+    let reader = FrameReader::new(std::io::stdin().lock(), STDIN, width, height, limits);
+    let mut reader = match reader {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = to_operator.send(Err(e.into()));
+            return;
+        }
+    };
+    while max_frames.is_none_or(|m| reader.frames_read() < m) {
+        let n = reader.frames_read();
+        let mut hdr = reused.try_recv().unwrap_or_else(|_| HdrImage::zeros(0, 0));
+        let frame = match reader.read_into(&mut hdr) {
+            Ok(false) => return,
+            Ok(true) => Ok(Decoded {
+                n,
+                input: PathBuf::from("-"),
+                hdr,
+            }),
+            Err(e) => Err(anyhow::Error::from(e)),
+        };
+        let failed = frame.is_err();
+        if to_operator.send(frame).is_err() || failed {
+            return;
+        }
+    }
+}
+
+/// The writer: write every mapped frame, atomically and in order (or onto the stream),
+/// then hand its image back to the operator. Stops at the first error (the operator then
+/// stops too, as its next frame finds no writer). Returns the number of frames written.
 fn write_frames(
     mapped: &mpsc::Receiver<Mapped>,
     free: &mpsc::Sender<DisplayImage>,
-    format: OutputFormat,
+    sink: Sink,
     progress: &ProgressBar,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<u64> {
+    let mut written = 0;
+    let mut buf = Vec::new();
     for frame in mapped {
-        io::write_display(&frame.display, &frame.path, format)
-            .with_context(|| frame.path.display().to_string())?;
+        match (sink, &frame.path) {
+            (Sink::Folder { format, .. }, Some(path)) => {
+                io::write_display(&frame.display, path, format)
+                    .with_context(|| path.display().to_string())?;
+            }
+            (Sink::Stream(raw), _) => {
+                let mut out = std::io::stdout().lock();
+                io::raw::write_frame(&frame.display, raw, &mut out, &mut buf)
+                    .and_then(|()| Ok(out.flush()?))
+                    .with_context(|| format!("frame {written}: standard output"))?;
+            }
+            (Sink::Folder { .. }, None) => unreachable!("a file frame has a path"),
+        }
         if let Some(line) = frame.json {
             println!("{line}");
         }
+        written += 1;
         progress.inc(1);
         // The operator may have finished: the image is then simply dropped.
         let _ = free.send(frame.display);
     }
-    Ok(())
+    Ok(written)
 }
 
 /// The operator, on the calling thread: each decoded frame in order through the time
@@ -283,25 +475,28 @@ fn write_frames(
 fn map_frames(
     args: &VideoArgs,
     conditions: &ViewingConditions,
-    frames: &[(u64, PathBuf)],
     dt: f64,
-    out_path: &dyn Fn(&Path) -> PathBuf,
     (decoded, free_hdr): (
-        &mpsc::Receiver<anyhow::Result<HdrImage>>,
+        &mpsc::Receiver<anyhow::Result<Decoded>>,
         &mpsc::Sender<HdrImage>,
     ),
     (to_writer, reused): (&mpsc::SyncSender<Mapped>, &mpsc::Receiver<DisplayImage>),
+    sink: Sink,
 ) -> anyhow::Result<()> {
     let mut eye: Option<Adaptation> = None;
     let mut size = None;
     let mut warned_units = false;
-    for (k, (n, input)) in frames.iter().enumerate() {
-        let what = || format!("frame {n} ({})", input.display());
-        // The reader ends only after sending every frame or an error.
-        let Ok(hdr) = decoded.recv() else {
-            return Ok(());
+    // The reader ends after sending every frame or an error.
+    for (k, frame) in decoded.iter().enumerate() {
+        let Decoded { n, input, mut hdr } = frame?;
+        let what = || {
+            let name = if input.as_os_str() == "-" {
+                STDIN.into()
+            } else {
+                input.display().to_string()
+            };
+            format!("frame {n} ({name})")
         };
-        let mut hdr = hdr?;
         match size {
             None => size = Some((hdr.width, hdr.height)),
             Some((w, h)) if (w, h) != (hdr.width, hdr.height) => {
@@ -318,8 +513,13 @@ fn map_frames(
             Some(s) => hdr.scale(s as f32),
             None if !hdr.absolute_units && !warned_units => {
                 log::warn!(
-                    "{}: the file does not say its units; values are taken as cd/m² (use --scale)",
-                    what()
+                    "{}: the {} does not say its units; values are taken as cd/m² (use --scale)",
+                    what(),
+                    if input.as_os_str() == "-" {
+                        "stream"
+                    } else {
+                        "file"
+                    }
                 );
                 warned_units = true;
             }
@@ -330,7 +530,12 @@ fn map_frames(
             ..conditions.clone()
         };
         if k == 0 {
-            super::warn_if_default_view(input, &hdr, &conditions);
+            let name = if input.as_os_str() == "-" {
+                Path::new(STDIN)
+            } else {
+                &input
+            };
+            super::warn_if_default_view(name, &hdr, &conditions);
         }
         let (scene, report) = operator::prepare(&hdr, &conditions).with_context(what)?;
         let state = match eye.as_mut() {
@@ -353,7 +558,7 @@ fn map_frames(
         drop(scene);
         // Back to the reader for a later frame (if it has finished, the image is dropped).
         let _ = free_hdr.send(hdr);
-        let out = out_path(input);
+        let out = sink.path(&input, n);
         let json = args.json.then(|| {
             let offset =
                 mapping.photopic_offset_cd_m2 + mapping.rod_weight * mapping.scotopic_offset_cd_m2;
@@ -361,7 +566,7 @@ fn map_frames(
                 "frame": n,
                 "t_seconds": k as f64 * dt,
                 "input": input.display().to_string(),
-                "output": out.display().to_string(),
+                "output": out.as_ref().map(|o| o.display().to_string()),
                 "world_adaptation_cd_m2": report.world_adaptation_cd_m2,
                 "world_adaptation_scotopic_cd_m2": report.world_adaptation_scotopic_cd_m2,
                 "cone_threshold_cd_m2": state.cone_threshold_cd_m2(),

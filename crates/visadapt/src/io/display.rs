@@ -11,32 +11,47 @@ use std::path::Path;
 /// Interleaved sRGB-encoded samples of a display image, 8 bits per channel, exactly
 /// rounded (see `colour::Srgb8`), encoded in parallel.
 pub fn to_srgb8(image: &DisplayImage) -> Vec<u8> {
+    let mut out = Vec::new();
+    srgb8_into(image, &mut out);
+    out
+}
+
+/// [`to_srgb8`] into `out` (its contents replaced, its memory reused).
+pub(crate) fn srgb8_into(image: &DisplayImage, out: &mut Vec<u8>) {
     let enc = Srgb8::get();
-    let mut out = vec![0u8; image.len() * 3];
-    par_pixels(&mut out, 3, |start, px| {
+    out.resize(image.len() * 3, 0);
+    par_pixels(out, 3, |start, px| {
         for (i, px) in px.chunks_exact_mut(3).enumerate() {
             px[0] = enc.encode(image.r[start + i]);
             px[1] = enc.encode(image.g[start + i]);
             px[2] = enc.encode(image.b[start + i]);
         }
     });
-    out
 }
 
-/// Interleaved big-endian sRGB-encoded samples, 16 bits per channel (see [`SrgbLut`]),
+/// Interleaved sRGB-encoded samples, 16 bits per channel (see [`SrgbLut`]), big-endian
+/// (PNG's order) or little-endian, into `out` (its contents replaced, its memory reused),
 /// encoded in parallel.
-fn to_srgb16_be(image: &DisplayImage) -> Vec<u8> {
-    let lut = SrgbLut::new(16);
-    let mut out = vec![0u8; image.len() * 6];
-    par_pixels(&mut out, 6, |start, px| {
+pub(crate) fn srgb16_into(image: &DisplayImage, big_endian: bool, out: &mut Vec<u8>) {
+    static LUT: std::sync::OnceLock<SrgbLut> = std::sync::OnceLock::new();
+    let lut = LUT.get_or_init(|| SrgbLut::new(16));
+    let bytes = |v: f32| {
+        let c = lut.encode(v);
+        if big_endian {
+            c.to_be_bytes()
+        } else {
+            c.to_le_bytes()
+        }
+    };
+    out.resize(image.len() * 6, 0);
+    par_pixels(out, 6, |start, px| {
         for (i, px) in px.chunks_exact_mut(6).enumerate() {
             let i = start + i;
-            px[0..2].copy_from_slice(&lut.encode(image.r[i]).to_be_bytes());
-            px[2..4].copy_from_slice(&lut.encode(image.g[i]).to_be_bytes());
-            px[4..6].copy_from_slice(&lut.encode(image.b[i]).to_be_bytes());
+            px[0..2].copy_from_slice(&bytes(image.r[i]));
+            px[2..4].copy_from_slice(&bytes(image.g[i]));
+            px[4..6].copy_from_slice(&bytes(image.b[i]));
         }
     });
-    out
 }
 
 /// Run `f(first pixel, bytes)` over pieces of `out` (`bytes_per_pixel` per pixel), in
@@ -60,6 +75,7 @@ fn par_pixels(out: &mut [u8], bytes_per_pixel: usize, f: impl Fn(usize, &mut [u8
 
 /// Write a PNG with `bits` (8 or 16) per channel, sRGB-encoded.
 pub fn write_png(image: &DisplayImage, bits: u8, w: impl Write) -> Result<()> {
+    image.validate()?;
     let (width, height) = dims_u32(image)?;
     let mut enc = png::Encoder::new(w, width, height);
     enc.set_color(png::ColorType::Rgb);
@@ -72,7 +88,9 @@ pub fn write_png(image: &DisplayImage, bits: u8, w: impl Write) -> Result<()> {
         }
         16 => {
             enc.set_depth(png::BitDepth::Sixteen);
-            to_srgb16_be(image)
+            let mut data = Vec::new();
+            srgb16_into(image, true, &mut data);
+            data
         }
         _ => {
             return Err(Error::invalid(
@@ -92,6 +110,7 @@ pub fn write_jpeg(image: &DisplayImage, quality: u8, w: impl Write) -> Result<()
     if !(1..=100).contains(&quality) {
         return Err(Error::invalid("quality", quality, "must be 1 to 100"));
     }
+    image.validate()?;
     let too_big = || {
         Error::Unsupported(format!(
             "JPEG cannot hold {}x{} pixels (at most 65535 per side)",

@@ -1188,15 +1188,8 @@ fn check_planes(width: usize, height: usize, planes: &[&[f32]]) -> Result<()> {
 /// (RLE), `chromaticities` = Rec. 709, `whiteLuminance` = `display_max_cd_m2`, so that
 /// RGB (1, 1, 1) is the display maximum in cd/m².
 pub fn write_display(image: &DisplayImage, w: impl std::io::Write + std::io::Seek) -> Result<()> {
-    check_planes(image.width, image.height, &[&image.r, &image.g, &image.b])?;
+    image.validate()?;
     let l = image.display_max_cd_m2;
-    if !(l.is_finite() && l > 0.0) {
-        return Err(Error::invalid(
-            "display-max",
-            l,
-            "must be a positive, finite luminance in cd/m²",
-        ));
-    }
     write_layer(
         image.width,
         image.height,

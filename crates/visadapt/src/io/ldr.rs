@@ -148,14 +148,8 @@ pub fn decode_jpeg(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
         .set_max_width(usize::MAX)
         .set_max_height(usize::MAX);
     let mut decoder = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
-    // The decoder's messages can end in a newline; errors here are one line.
-    let fail = |e: zune_jpeg::errors::DecodeErrors| {
-        let message = e.to_string();
-        Error::decode(
-            JPEG,
-            message.split_whitespace().collect::<Vec<_>>().join(" "),
-        )
-    };
+    // The decoder's messages can end in a newline: `Error::decode` folds them to one line.
+    let fail = |e: zune_jpeg::errors::DecodeErrors| Error::decode(JPEG, e.to_string());
     decoder.decode_headers().map_err(fail)?;
     let info = decoder
         .info()

@@ -1,7 +1,7 @@
 //! Reading HDR images (Radiance `.hdr`/`.pic`, OpenEXR, PFM) into an [`HdrImage`] in
 //! absolute units, and display-encoded photographs (8/16-bit PNG, JPEG, TIFF: [`ldr`]) in
 //! relative units; writing display images (PNG, JPEG, OpenEXR, 32-bit float TIFF,
-//! Radiance).
+//! Radiance); raw video frames to and from ffmpeg pipes ([`raw`]).
 //!
 //! The input format is detected from the file's first bytes, not its name.
 
@@ -14,6 +14,7 @@ pub mod ldr;
 pub mod output;
 pub mod pfm;
 pub mod radiance;
+pub mod raw;
 pub mod tiff;
 
 /// The input formats the library reads.

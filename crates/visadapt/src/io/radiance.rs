@@ -821,22 +821,8 @@ impl Converter {
 pub fn write_display(image: &crate::DisplayImage, mut w: impl std::io::Write) -> Result<()> {
     use std::io::Write;
     let (width, height) = (image.width, image.height);
-    let n = width * height;
-    if [&image.r, &image.g, &image.b].iter().any(|p| p.len() != n) {
-        return Err(Error::invalid(
-            "image",
-            format!("{width}x{height}"),
-            "its planes do not have width x height samples",
-        ));
-    }
+    image.validate()?;
     let l = image.display_max_cd_m2;
-    if !(l.is_finite() && l > 0.0) {
-        return Err(Error::invalid(
-            "display-max",
-            l,
-            "must be a positive, finite luminance in cd/m²",
-        ));
-    }
     let p = colour::REC709;
     let header = format!(
         "#?RADIANCE\n\

@@ -31,22 +31,8 @@ pub const DISPLAY_MAX_PREFIX: &str = "visadapt display-referred linear Rec. 709 
 pub fn write_display(image: &DisplayImage, w: impl Write + Seek) -> Result<()> {
     use ::tiff::encoder::{TiffEncoder, colortype::RGB32Float};
     use ::tiff::tags::Tag;
-    let n = image.width * image.height;
-    if [&image.r, &image.g, &image.b].iter().any(|p| p.len() != n) {
-        return Err(Error::invalid(
-            "image",
-            format!("{}x{}", image.width, image.height),
-            "its planes do not have width x height samples",
-        ));
-    }
-    let l = image.display_max_cd_m2;
-    if !(l.is_finite() && l > 0.0) {
-        return Err(Error::invalid(
-            "display-max",
-            l,
-            "must be a positive, finite luminance in cd/m²",
-        ));
-    }
+    image.validate()?;
+    let (n, l) = (image.len(), image.display_max_cd_m2);
     let dims = |v: usize| {
         u32::try_from(v).map_err(|_| {
             Error::Unsupported(format!(
