@@ -259,19 +259,10 @@ impl DisplayImage {
         self.len() == 0
     }
 
-    /// Check what every display writer needs (PNG, JPEG, OpenEXR, TIFF, Radiance, raw
-    /// frames): a non-empty image whose three planes hold `width × height` samples, and a
-    /// positive, finite [`display_max_cd_m2`](Self::display_max_cd_m2).
-    ///
-    /// ```
-    /// use visadapt::DisplayImage;
-    /// let mut image = DisplayImage { width: 2, height: 1, r: vec![0.5; 2], g: vec![0.5; 2],
-    ///                                b: vec![0.5; 2], display_max_cd_m2: 100.0 };
-    /// assert!(image.validate().is_ok());
-    /// image.b.pop();
-    /// assert!(image.validate().is_err());
-    /// ```
-    pub fn validate(&self) -> crate::Result<()> {
+    /// Check what every display writer needs (PNG, JPEG, raw frames, and through
+    /// [`validate`](Self::validate) OpenEXR, TIFF and Radiance): a non-empty image whose
+    /// three planes hold `width × height` samples.
+    pub fn validate_planes(&self) -> crate::Result<()> {
         let n = self.width.checked_mul(self.height).unwrap_or(0);
         if n == 0 || [&self.r, &self.g, &self.b].iter().any(|p| p.len() != n) {
             return Err(crate::Error::invalid(
@@ -280,6 +271,27 @@ impl DisplayImage {
                 "planes must be non-empty and hold width*height samples",
             ));
         }
+        Ok(())
+    }
+
+    /// Check what the writers that record the display maximum need (OpenEXR, TIFF,
+    /// Radiance): [`validate_planes`](Self::validate_planes), and a positive, finite
+    /// [`display_max_cd_m2`](Self::display_max_cd_m2). (The sRGB encodings, PNG, JPEG and
+    /// raw frames, do not depend on it: a display maximum below the smallest `f32`, which
+    /// rounds to 0, still encodes.)
+    ///
+    /// ```
+    /// use visadapt::DisplayImage;
+    /// let mut image = DisplayImage { width: 2, height: 1, r: vec![0.5; 2], g: vec![0.5; 2],
+    ///                                b: vec![0.5; 2], display_max_cd_m2: 100.0 };
+    /// assert!(image.validate().is_ok());
+    /// image.display_max_cd_m2 = 0.0;
+    /// assert!(image.validate().is_err() && image.validate_planes().is_ok());
+    /// image.b.pop();
+    /// assert!(image.validate_planes().is_err());
+    /// ```
+    pub fn validate(&self) -> crate::Result<()> {
+        self.validate_planes()?;
         let l = self.display_max_cd_m2;
         if !(l.is_finite() && l > 0.0) {
             return Err(crate::Error::invalid(

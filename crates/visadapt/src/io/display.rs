@@ -75,7 +75,7 @@ fn par_pixels(out: &mut [u8], bytes_per_pixel: usize, f: impl Fn(usize, &mut [u8
 
 /// Write a PNG with `bits` (8 or 16) per channel, sRGB-encoded.
 pub fn write_png(image: &DisplayImage, bits: u8, w: impl Write) -> Result<()> {
-    image.validate()?;
+    image.validate_planes()?;
     let (width, height) = dims_u32(image)?;
     let mut enc = png::Encoder::new(w, width, height);
     enc.set_color(png::ColorType::Rgb);
@@ -110,7 +110,7 @@ pub fn write_jpeg(image: &DisplayImage, quality: u8, w: impl Write) -> Result<()
     if !(1..=100).contains(&quality) {
         return Err(Error::invalid("quality", quality, "must be 1 to 100"));
     }
-    image.validate()?;
+    image.validate_planes()?;
     let too_big = || {
         Error::Unsupported(format!(
             "JPEG cannot hold {}x{} pixels (at most 65535 per side)",

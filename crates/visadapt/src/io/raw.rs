@@ -232,9 +232,9 @@ impl RawFormat {
 }
 
 /// Encode a display image as one raw frame into `out` (its previous contents replaced,
-/// its memory reused), after [`DisplayImage::validate`].
+/// its memory reused), after [`DisplayImage::validate_planes`].
 pub fn encode_frame(image: &DisplayImage, format: RawFormat, out: &mut Vec<u8>) -> Result<()> {
-    image.validate()?;
+    image.validate_planes()?;
     match format {
         RawFormat::Rgb48le => super::display::srgb16_into(image, false, out),
         RawFormat::Rgb24 => super::display::srgb8_into(image, out),
