@@ -116,9 +116,11 @@ pub struct WorldAdaptationArgs {
     pub scotopic_adaptation: Option<f64>,
 }
 
-/// The view of the image and the acuity blur (map, visible, sequence, video).
+/// The view of the image: how its pixels become degrees, for the acuity blur, the glare
+/// spread function and the local adaptation radius (map, visible, sequence, video, serve,
+/// tolerance).
 #[derive(Debug, Clone, Args)]
-pub struct ViewArgs {
+pub struct FieldOfViewArgs {
     /// Horizontal field of view of the image in degrees. Overrides the file's view;
     /// without either, a 60-degree perspective view is assumed.
     #[arg(long, allow_negative_numbers = true, value_parser = positive, value_name = "DEG")]
@@ -128,6 +130,13 @@ pub struct ViewArgs {
     /// fisheye (pixels uniform in angle, up to 360 degrees).
     #[arg(long, value_enum, value_name = "KIND", default_value_t = ProjectionArg::Perspective, requires = "fov")]
     pub projection: ProjectionArg,
+}
+
+/// The view of the image and the acuity blur (map, visible, sequence, video, serve).
+#[derive(Debug, Clone, Args)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub field: FieldOfViewArgs,
 
     /// Skip the acuity blur (Eq. 7).
     #[arg(long)]
@@ -356,6 +365,19 @@ impl ViewArgs {
     /// The view `--fov` and `--projection` give an image of `width × height` pixels;
     /// `None` to use the file's.
     pub fn view(&self, width: usize, height: usize) -> Option<visadapt::View> {
+        self.field.view(width, height)
+    }
+
+    /// [`FieldOfViewArgs::check`].
+    pub fn check(&self) -> Result<(), String> {
+        self.field.check()
+    }
+}
+
+impl FieldOfViewArgs {
+    /// The view `--fov` and `--projection` give an image of `width × height` pixels;
+    /// `None` to use the file's.
+    pub fn view(&self, width: usize, height: usize) -> Option<visadapt::View> {
         self.fov.map(|fov| match self.projection {
             ProjectionArg::Perspective => visadapt::View::perspective(fov, width, height),
             ProjectionArg::Fisheye => visadapt::View::angular_fisheye(fov, width, height),
@@ -386,6 +408,7 @@ impl Cli {
             Command::Visible(a) => ("visible", a.view.check()),
             Command::Sequence(a) => ("sequence", a.view.check()),
             Command::Video(a) => ("video", a.view.check()),
+            Command::Tolerance(a) => ("tolerance", a.field.check()),
             #[cfg(feature = "serve")]
             Command::Serve(a) => ("serve", a.view.check()),
             _ => return Ok(()),
@@ -836,9 +859,11 @@ const TOLERANCE_EXAMPLES: &str = "\
 Examples:
   visadapt tolerance render.exr -o tolerance.exr
   visadapt tolerance scene.hdr --peak 0.05 -o night-tolerance.exr --json
+  visadapt tolerance render.exr --adaptation local --fov 50 -o tolerance.exr
 
 The map holds, per pixel, the luminance threshold in cd/m² for a change of that pixel's
-colour (Eq. 4-6 at the observer's adaptation): errors below it are invisible.";
+colour (Eq. 4-6 at the observer's adaptation): errors below it are invisible. Acuity does not
+enter it; the view (--fov) sets the degrees of --glare and of --adaptation local.";
 
 #[derive(Debug, Args)]
 pub struct VisibleArgs {
@@ -886,6 +911,9 @@ pub struct ToleranceArgs {
 
     #[command(flatten)]
     pub world: WorldAdaptationArgs,
+
+    #[command(flatten)]
+    pub field: FieldOfViewArgs,
 
     #[command(flatten)]
     pub units: UnitsArgs,

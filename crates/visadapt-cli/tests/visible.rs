@@ -436,3 +436,107 @@ fn tolerance_bad_input_gives_one_clear_error_and_no_output() {
     assert!(one_line_error(&out.stderr).contains(".exr"));
     assert_eq!(files_in(dir.path()), ["garbage.exr", "in.exr"]);
 }
+
+/// `tolerance --fov` (the view flags `map` and `visible` have): the view sets how many
+/// degrees a pixel spans for the stages that work in degrees. Acuity does not enter the
+/// tolerance (it holds for errors of any extent), so with global adaptation and no glare
+/// the view changes nothing; with local adaptation (a neighbourhood of 1 degree, `local`
+/// module) it does. A 64×16 ramp, log luminance falling linearly from 1000 cd/m² on the
+/// left to 1 cd/m² on the right (0.047 log units per pixel): at a 60-degree view a pixel
+/// spans 0.94 degree and a pixel's neighbourhood is about itself, so the darkest column
+/// adapts to about its own level; at a 2-degree view the 1-degree neighbourhood spans half
+/// the ramp (less the edge-aware term: 2 degrees per log unit, 0.094 degree per pixel),
+/// and at the ramp's dark end it reaches only brighter pixels: a higher adaptation, a
+/// higher tolerance. Both against the library's map for the same view, exactly.
+#[test]
+fn tolerance_takes_the_view_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (64, 16);
+    let mut field = grey(w, h, 1.0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let l = 10f32.powf(3.0 * (1.0 - x as f32 / (w - 1) as f32));
+            (field.x[i], field.y[i], field.z[i]) = (l, l, l);
+            field.scotopic.as_mut().unwrap()[i] = 2.261 * l;
+        }
+    }
+    let input = write(dir.path(), "ramp.exr", &field);
+    let run = |extra: &[&str]| -> Vec<f32> {
+        let tol = dir.path().join("tol.exr");
+        let out = visadapt()
+            .arg("tolerance")
+            .arg(&input)
+            .arg("-o")
+            .arg(&tol)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        visadapt::io::read(&tol, &Limits::default()).unwrap().y
+    };
+    let mut local = Vec::new();
+    for fov in [60.0, 2.0] {
+        // The CLI's map is the library's for that view.
+        let got = run(&["--adaptation", "local", "--fov", &fov.to_string()]);
+        let conditions = visadapt::operator::ViewingConditions {
+            acuity: false,
+            adaptation: visadapt::operator::AdaptationMode::Local(Default::default()),
+            view: Some(visadapt::View::perspective(fov, w, h)),
+            ..Default::default()
+        };
+        let observation =
+            visadapt::visibility::Observation::for_image(&field, &conditions).unwrap();
+        let expected = visadapt::visibility::tolerance_map(&field, &observation.viewer()).unwrap();
+        assert_eq!(got, expected, "--fov {fov}");
+        local.push(got);
+    }
+    let dark = 8 * w + w - 1;
+    // 60 degrees: adapted to at most its own 1 cd/m² (the brightest neighbourhoods keep
+    // the global 500 cd/m², half the highest visible), so under t_p(1) = 0.391 cd/m²
+    // (the rods, pooled, only lower it); measured 0.312.
+    assert!((local[0][dark] as f64) < tp(1.0), "{}", local[0][dark]);
+    // 2 degrees: the dark end sees brighter pixels; measured 0.425, 36 % higher.
+    assert!(
+        local[1][dark] > 1.2 * local[0][dark],
+        "{} against {}",
+        local[1][dark],
+        local[0][dark]
+    );
+    // Without a view in the file or --fov, the stages in degrees say they guess it.
+    for (extra, warned) in [
+        (&["--adaptation", "local"][..], true),
+        (&["--glare"][..], true),
+        (&[][..], false),
+    ] {
+        let out = visadapt()
+            .arg("tolerance")
+            .arg(&input)
+            .arg("-o")
+            .arg(dir.path().join("tol.exr"))
+            .args(extra)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            stderr.matches("does not record its view").count(),
+            usize::from(warned),
+            "{extra:?}: {stderr}"
+        );
+    }
+    // Global adaptation without glare: the view changes nothing.
+    let global = run(&[]);
+    assert_eq!(run(&["--fov", "5"]), global);
+    // A perspective view under 180 degrees, as for map.
+    let out = visadapt()
+        .arg("tolerance")
+        .arg(&input)
+        .args(["-o", "t.exr", "--fov", "200"])
+        .output()
+        .unwrap();
+    assert!(usage_error(&out.stderr).contains("--projection fisheye"));
+}

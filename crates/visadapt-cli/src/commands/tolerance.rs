@@ -40,6 +40,13 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     if scale != 1.0 {
         image.scale(scale as f32);
     }
+    let conditions = ViewingConditions {
+        // The view sets the degrees of the glare spread function and of the local
+        // adaptation radius.
+        view: args.field.view(image.width, image.height),
+        ..conditions
+    };
+    super::warn_if_default_view(&args.input, &image, &conditions);
     let observation = Observation::for_image(&image, &conditions)?;
     let (viewer, report) = (observation.viewer(), &observation.report);
     let tolerance = visibility::tolerance_map(&image, &viewer)?;
