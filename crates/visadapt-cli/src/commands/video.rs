@@ -27,6 +27,7 @@
 //! written, nothing after it is, and the error names its frame.
 
 use crate::cli::{VideoArgs, VideoFormat};
+use crate::numbers::count;
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::Write;
@@ -324,13 +325,13 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     })?;
     progress.finish_and_clear();
     if !args.json {
-        let report = format!("wrote {} to {}", frames_phrase(written), {
-            if stdout {
-                "standard output".to_string()
-            } else {
-                args.output.display().to_string()
-            }
-        });
+        let to = if stdout {
+            "standard output".to_string()
+        } else {
+            args.output.display().to_string()
+        };
+        let frames = usize::try_from(written).unwrap_or(usize::MAX);
+        let report = format!("wrote {} to {to}", count(frames, "frame", "frames"));
         // Standard output carries the frames with -o -: the report goes to standard error.
         if stdout {
             eprintln!("{report}");
@@ -339,11 +340,6 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
-}
-
-/// `1 frame`, `2 frames`.
-fn frames_phrase(n: u64) -> String {
-    format!("{n} frame{}", if n == 1 { "" } else { "s" })
 }
 
 /// Frames each queue between two stages holds beyond the one handed over: none. A stage
