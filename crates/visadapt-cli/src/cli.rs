@@ -116,9 +116,11 @@ pub struct WorldAdaptationArgs {
     pub scotopic_adaptation: Option<f64>,
 }
 
-/// The view of the image and the acuity blur (map, visible, sequence, video).
+/// The view of the image: how its pixels become degrees, for the acuity blur, the glare
+/// spread function and the local adaptation radius (map, visible, sequence, video, serve,
+/// tolerance).
 #[derive(Debug, Clone, Args)]
-pub struct ViewArgs {
+pub struct FieldOfViewArgs {
     /// Horizontal field of view of the image in degrees. Overrides the file's view;
     /// without either, a 60-degree perspective view is assumed.
     #[arg(long, allow_negative_numbers = true, value_parser = positive, value_name = "DEG")]
@@ -128,6 +130,13 @@ pub struct ViewArgs {
     /// fisheye (pixels uniform in angle, up to 360 degrees).
     #[arg(long, value_enum, value_name = "KIND", default_value_t = ProjectionArg::Perspective, requires = "fov")]
     pub projection: ProjectionArg,
+}
+
+/// The view of the image and the acuity blur (map, visible, sequence, video, serve).
+#[derive(Debug, Clone, Args)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub field: FieldOfViewArgs,
 
     /// Skip the acuity blur (Eq. 7).
     #[arg(long)]
@@ -356,6 +365,19 @@ impl ViewArgs {
     /// The view `--fov` and `--projection` give an image of `width × height` pixels;
     /// `None` to use the file's.
     pub fn view(&self, width: usize, height: usize) -> Option<visadapt::View> {
+        self.field.view(width, height)
+    }
+
+    /// [`FieldOfViewArgs::check`].
+    pub fn check(&self) -> Result<(), String> {
+        self.field.check()
+    }
+}
+
+impl FieldOfViewArgs {
+    /// The view `--fov` and `--projection` give an image of `width × height` pixels;
+    /// `None` to use the file's.
+    pub fn view(&self, width: usize, height: usize) -> Option<visadapt::View> {
         self.fov.map(|fov| match self.projection {
             ProjectionArg::Perspective => visadapt::View::perspective(fov, width, height),
             ProjectionArg::Fisheye => visadapt::View::angular_fisheye(fov, width, height),
@@ -386,6 +408,7 @@ impl Cli {
             Command::Visible(a) => ("visible", a.view.check()),
             Command::Sequence(a) => ("sequence", a.view.check()),
             Command::Video(a) => ("video", a.view.check()),
+            Command::Tolerance(a) => ("tolerance", a.field.check()),
             #[cfg(feature = "serve")]
             Command::Serve(a) => ("serve", a.view.check()),
             _ => return Ok(()),
@@ -748,7 +771,7 @@ pub struct DemoArgs {
 pub struct PlotArgs {
     /// The figure to draw, by name or by the paper's figure number: fig2, fig3, fig4, fig7,
     /// fig8, fig9 or fig10 (figs. 8-10 are one plot).
-    #[arg(value_enum, value_name = "NAME")]
+    #[arg(value_name = "NAME", value_parser = PlotNameParser)]
     pub name: PlotName,
 
     /// Output picture; the format follows the extension (.svg or .png).
@@ -776,6 +799,50 @@ pub enum PlotName {
     Timecourse,
 }
 
+/// [`PlotName`]'s parser: clap's own, except that a refused name is answered with every
+/// accepted one, the short figure names included (clap lists only the long ones).
+#[derive(Clone)]
+struct PlotNameParser;
+
+impl clap::builder::TypedValueParser for PlotNameParser {
+    type Value = PlotName;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> Result<PlotName, clap::Error> {
+        use clap::ValueEnum;
+        use clap::error::{ContextKind, ContextValue};
+        clap::builder::EnumValueParser::<PlotName>::new()
+            .parse_ref(cmd, arg, value)
+            .map_err(|mut e| {
+                let names = PlotName::value_variants()
+                    .iter()
+                    .filter_map(PlotName::to_possible_value)
+                    .flat_map(|v| {
+                        v.get_name_and_aliases()
+                            .map(str::to_string)
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                e.insert(ContextKind::ValidValue, ContextValue::Strings(names));
+                e
+            })
+    }
+
+    fn possible_values(
+        &self,
+    ) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
+        Some(Box::new(
+            <PlotName as clap::ValueEnum>::value_variants()
+                .iter()
+                .filter_map(clap::ValueEnum::to_possible_value),
+        ))
+    }
+}
+
 const VISIBLE_EXAMPLES: &str = "\
 Examples:
   visadapt visible reference.exr render.exr                 # fraction visible, mean and max JND
@@ -792,9 +859,11 @@ const TOLERANCE_EXAMPLES: &str = "\
 Examples:
   visadapt tolerance render.exr -o tolerance.exr
   visadapt tolerance scene.hdr --peak 0.05 -o night-tolerance.exr --json
+  visadapt tolerance render.exr --adaptation local --fov 50 -o tolerance.exr
 
 The map holds, per pixel, the luminance threshold in cd/m² for a change of that pixel's
-colour (Eq. 4-6 at the observer's adaptation): errors below it are invisible.";
+colour (Eq. 4-6 at the observer's adaptation): errors below it are invisible. Acuity does not
+enter it; the view (--fov) sets the degrees of --glare and of --adaptation local.";
 
 #[derive(Debug, Args)]
 pub struct VisibleArgs {
@@ -842,6 +911,9 @@ pub struct ToleranceArgs {
 
     #[command(flatten)]
     pub world: WorldAdaptationArgs,
+
+    #[command(flatten)]
+    pub field: FieldOfViewArgs,
 
     #[command(flatten)]
     pub units: UnitsArgs,

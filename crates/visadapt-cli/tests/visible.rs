@@ -122,27 +122,39 @@ fn noise_is_reported_in_jnds_with_a_heat_map() {
     // 60° over 64 px: the acuity Gaussian is far below a pixel.
     assert_eq!(v["blur_sigma_px"], 0.0);
 
-    // The heat map: the image, then a colour bar panel; at least 240 px high.
+    // The heat map: the image, then a colour bar panel; at least 240 px high. The 64×32
+    // image is enlarged 7 times (224 rows, the most whole pixels within 240) and centred
+    // vertically, 8 rows above and below (issue 13: it sat unenlarged in the top corner).
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&map).unwrap()));
     let mut reader = decoder.read_info().unwrap();
     let (w, h) = (reader.info().width as usize, reader.info().height as usize);
-    assert_eq!((w, h), (64 + 150, 240));
+    assert_eq!((w, h), (7 * 64 + 150, 240));
     let mut rgb = vec![0u8; reader.output_buffer_size().unwrap()];
     reader.next_frame(&mut rgb).unwrap();
     let px = |x: usize, y: usize| {
         let i = (y * w + x) * 3;
         [rgb[i], rgb[i + 1], rgb[i + 2]]
     };
-    // 3 JND is red-magenta (inferno at 0.49), 0.5 JND dark purple (inferno at 0.23).
-    assert_eq!(px(10, 10), [185, 54, 85]);
-    assert_eq!(px(50, 10), [81, 15, 103]);
-    // Below the image: white. The bar: pale yellow at its top (100 JND), near-black at
-    // its bottom (0.1 JND); black label text beside it.
-    assert_eq!(px(10, 100), [255, 255, 255]);
-    let bar_x = 64 + 24;
+    // 3 JND is red-magenta (inferno at 0.49), 0.5 JND dark purple (inferno at 0.23): image
+    // pixel (x, y) covers the canvas from (7x, 8 + 7y) to (7x + 6, 8 + 7y + 6).
+    let at = |x: usize, y: usize, dx: usize, dy: usize| px(7 * x + dx, 8 + 7 * y + dy);
+    for (dx, dy) in [(0, 0), (6, 6), (3, 2)] {
+        assert_eq!(at(10, 10, dx, dy), [185, 54, 85]);
+        assert_eq!(at(50, 10, dx, dy), [81, 15, 103]);
+        assert_eq!(at(10, 0, dx, dy), [185, 54, 85]);
+        assert_eq!(at(50, 31, dx, dy), [81, 15, 103]);
+    }
+    // Above and below the image: white. The bar: pale yellow at its top (100 JND),
+    // near-black at its bottom (0.1 JND); black label text beside it.
+    for x in [0, 70, 447] {
+        for y in [0, 7, 232, 239] {
+            assert_eq!(px(x, y), [255, 255, 255], "({x}, {y})");
+        }
+    }
+    let bar_x = 7 * 64 + 24;
     assert_eq!(px(bar_x, 34), [252, 255, 164]);
     assert_eq!(px(bar_x, 226), [0, 0, 4]);
-    let dark_text = (64 + 40..w)
+    let dark_text = (7 * 64 + 40..w)
         .flat_map(|x| (0..h).map(move |y| (x, y)))
         .filter(|&(x, y)| px(x, y).iter().all(|&c| c < 80))
         .count();
@@ -167,7 +179,7 @@ fn text_report_names_the_results() {
     assert!(s.contains("50.000 % of the pixels at 1 JND or more"), "{s}");
     assert!(s.contains("mean 1.75"), "{s}");
     assert!(
-        s.contains("adapted to 5.0000e1 cd/m² (from the reference)"),
+        s.contains("adapted to 50 cd/m² (from the reference)"),
         "{s}"
     );
 }
@@ -423,4 +435,108 @@ fn tolerance_bad_input_gives_one_clear_error_and_no_output() {
     assert!(!out.status.success());
     assert!(one_line_error(&out.stderr).contains(".exr"));
     assert_eq!(files_in(dir.path()), ["garbage.exr", "in.exr"]);
+}
+
+/// `tolerance --fov` (the view flags `map` and `visible` have): the view sets how many
+/// degrees a pixel spans for the stages that work in degrees. Acuity does not enter the
+/// tolerance (it holds for errors of any extent), so with global adaptation and no glare
+/// the view changes nothing; with local adaptation (a neighbourhood of 1 degree, `local`
+/// module) it does. A 64×16 ramp, log luminance falling linearly from 1000 cd/m² on the
+/// left to 1 cd/m² on the right (0.047 log units per pixel): at a 60-degree view a pixel
+/// spans 0.94 degree and a pixel's neighbourhood is about itself, so the darkest column
+/// adapts to about its own level; at a 2-degree view the 1-degree neighbourhood spans half
+/// the ramp (less the edge-aware term: 2 degrees per log unit, 0.094 degree per pixel),
+/// and at the ramp's dark end it reaches only brighter pixels: a higher adaptation, a
+/// higher tolerance. Both against the library's map for the same view, exactly.
+#[test]
+fn tolerance_takes_the_view_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (64, 16);
+    let mut field = grey(w, h, 1.0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let l = 10f32.powf(3.0 * (1.0 - x as f32 / (w - 1) as f32));
+            (field.x[i], field.y[i], field.z[i]) = (l, l, l);
+            field.scotopic.as_mut().unwrap()[i] = 2.261 * l;
+        }
+    }
+    let input = write(dir.path(), "ramp.exr", &field);
+    let run = |extra: &[&str]| -> Vec<f32> {
+        let tol = dir.path().join("tol.exr");
+        let out = visadapt()
+            .arg("tolerance")
+            .arg(&input)
+            .arg("-o")
+            .arg(&tol)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        visadapt::io::read(&tol, &Limits::default()).unwrap().y
+    };
+    let mut local = Vec::new();
+    for fov in [60.0, 2.0] {
+        // The CLI's map is the library's for that view.
+        let got = run(&["--adaptation", "local", "--fov", &fov.to_string()]);
+        let conditions = visadapt::operator::ViewingConditions {
+            acuity: false,
+            adaptation: visadapt::operator::AdaptationMode::Local(Default::default()),
+            view: Some(visadapt::View::perspective(fov, w, h)),
+            ..Default::default()
+        };
+        let observation =
+            visadapt::visibility::Observation::for_image(&field, &conditions).unwrap();
+        let expected = visadapt::visibility::tolerance_map(&field, &observation.viewer()).unwrap();
+        assert_eq!(got, expected, "--fov {fov}");
+        local.push(got);
+    }
+    let dark = 8 * w + w - 1;
+    // 60 degrees: adapted to at most its own 1 cd/m² (the brightest neighbourhoods keep
+    // the global 500 cd/m², half the highest visible), so under t_p(1) = 0.391 cd/m²
+    // (the rods, pooled, only lower it); measured 0.312.
+    assert!((local[0][dark] as f64) < tp(1.0), "{}", local[0][dark]);
+    // 2 degrees: the dark end sees brighter pixels; measured 0.425, 36 % higher.
+    assert!(
+        local[1][dark] > 1.2 * local[0][dark],
+        "{} against {}",
+        local[1][dark],
+        local[0][dark]
+    );
+    // Without a view in the file or --fov, the stages in degrees say they guess it.
+    for (extra, warned) in [
+        (&["--adaptation", "local"][..], true),
+        (&["--glare"][..], true),
+        (&[][..], false),
+    ] {
+        let out = visadapt()
+            .arg("tolerance")
+            .arg(&input)
+            .arg("-o")
+            .arg(dir.path().join("tol.exr"))
+            .args(extra)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            stderr.matches("does not record its view").count(),
+            usize::from(warned),
+            "{extra:?}: {stderr}"
+        );
+    }
+    // Global adaptation without glare: the view changes nothing.
+    let global = run(&[]);
+    assert_eq!(run(&["--fov", "5"]), global);
+    // A perspective view under 180 degrees, as for map.
+    let out = visadapt()
+        .arg("tolerance")
+        .arg(&input)
+        .args(["-o", "t.exr", "--fov", "200"])
+        .output()
+        .unwrap();
+    assert!(usage_error(&out.stderr).contains("--projection fisheye"));
 }

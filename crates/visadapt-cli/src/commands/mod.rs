@@ -64,17 +64,40 @@ pub fn check_output_folder(output: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Warn that acuity is about to use the default view: the file records none and `--fov`
-/// is not given, so degrees become pixels by a guess.
+/// Warn that the model is about to use the default view: the file records none and `--fov`
+/// is not given, so degrees become pixels by a guess. Only when a stage works in degrees:
+/// the acuity blur, the glare spread function, the local adaptation radius.
 pub fn warn_if_default_view(
     path: &Path,
     image: &HdrImage,
     conditions: &visadapt::operator::ViewingConditions,
 ) {
-    if conditions.acuity && conditions.view.is_none() && image.view.is_none() {
+    if conditions.view.is_some() || image.view.is_some() {
+        return;
+    }
+    let local = matches!(
+        conditions.adaptation,
+        visadapt::operator::AdaptationMode::Local(_)
+    );
+    let stages: Vec<&str> = [
+        (conditions.acuity, "the acuity blur"),
+        (conditions.glare.is_some(), "the glare"),
+        (local, "the local adaptation"),
+    ]
+    .into_iter()
+    .filter_map(|(on, name)| on.then_some(name))
+    .collect();
+    if let Some((last, rest)) = stages.split_last() {
+        let named = if rest.is_empty() {
+            last.to_string()
+        } else {
+            format!("{} and {last}", rest.join(", "))
+        };
         log::warn!(
-            "{}: the file does not record its view; the acuity blur assumes a {} degree perspective view (give --fov)",
+            "{}: the file does not record its view; {} assume{} a {} degree perspective view (give --fov)",
             path.display(),
+            named,
+            if rest.is_empty() { "s" } else { "" },
             visadapt::operator::DEFAULT_FOV_DEG
         );
     }
