@@ -44,7 +44,7 @@
 //! and along rows interleaved 32 at a time by blocked 8×8 transposes. The FIR adds the
 //! symmetric taps' sample pairs first (half the multiplies), accumulates a block of
 //! outputs at once in registers (eight vectors: 64 samples with AVX2, 128 with
-//! AVX-512), and runs as one pass over the rows ([`exact_pass`]): each row is filtered
+//! AVX-512), and runs as one pass over the rows (`exact_pass`): each row is filtered
 //! along itself into a ring of the last `2R + 1` rows (in cache, rows aligned to cache
 //! lines) and each output row is filtered down the ring and written once, so a plane
 //! makes one trip through memory; the operator fuses its mapping and clipping into the
