@@ -771,7 +771,7 @@ pub struct DemoArgs {
 pub struct PlotArgs {
     /// The figure to draw, by name or by the paper's figure number: fig2, fig3, fig4, fig7,
     /// fig8, fig9 or fig10 (figs. 8-10 are one plot).
-    #[arg(value_enum, value_name = "NAME")]
+    #[arg(value_name = "NAME", value_parser = PlotNameParser)]
     pub name: PlotName,
 
     /// Output picture; the format follows the extension (.svg or .png).
@@ -797,6 +797,50 @@ pub enum PlotName {
     /// Figs. 8-10: the time course of light (rods, cones) and dark adaptation.
     #[value(name = "timecourse", aliases = ["fig8-10", "fig8", "fig9", "fig10"])]
     Timecourse,
+}
+
+/// [`PlotName`]'s parser: clap's own, except that a refused name is answered with every
+/// accepted one, the short figure names included (clap lists only the long ones).
+#[derive(Clone)]
+struct PlotNameParser;
+
+impl clap::builder::TypedValueParser for PlotNameParser {
+    type Value = PlotName;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> Result<PlotName, clap::Error> {
+        use clap::ValueEnum;
+        use clap::error::{ContextKind, ContextValue};
+        clap::builder::EnumValueParser::<PlotName>::new()
+            .parse_ref(cmd, arg, value)
+            .map_err(|mut e| {
+                let names = PlotName::value_variants()
+                    .iter()
+                    .filter_map(PlotName::to_possible_value)
+                    .flat_map(|v| {
+                        v.get_name_and_aliases()
+                            .map(str::to_string)
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                e.insert(ContextKind::ValidValue, ContextValue::Strings(names));
+                e
+            })
+    }
+
+    fn possible_values(
+        &self,
+    ) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
+        Some(Box::new(
+            <PlotName as clap::ValueEnum>::value_variants()
+                .iter()
+                .filter_map(clap::ValueEnum::to_possible_value),
+        ))
+    }
 }
 
 const VISIBLE_EXAMPLES: &str = "\

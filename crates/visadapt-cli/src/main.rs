@@ -6,6 +6,7 @@
 mod cli;
 mod commands;
 mod graphics;
+mod numbers;
 mod report;
 mod signals;
 

@@ -1,28 +1,29 @@
 //! Text renderings of what the model used (the JSON ones are the library's
 //! [`visadapt::report`], shared with the Python package and the viewer).
 
+use crate::numbers::{count, num};
 use visadapt::observer::Observer;
 use visadapt::operator::{PixelStats, Report};
 use visadapt::report::{projection_label as projection, source_label as source};
 
 pub fn observer_text(o: &Observer) -> String {
     format!(
-        "observer adapted to {:.4e} cd/m² ({:.4e} scotopic cd/m²), display {} cd/m² (adapted to {})\n\
-         cone threshold (Eq. 4)        {:.4e} cd/m²\n\
-         rod threshold (Eq. 5)         {:.4e} scotopic cd/m²\n\
-         photopic scale m_p (Eq. 3)    {:.4e}\n\
-         scotopic scale m_s (Eq. 3)    {:.4e}\n\
+        "observer adapted to {} cd/m² ({} scotopic cd/m²), display {} cd/m² (adapted to {})\n\
+         cone threshold (Eq. 4)        {} cd/m²\n\
+         rod threshold (Eq. 5)         {} scotopic cd/m²\n\
+         photopic scale m_p (Eq. 3)    {}\n\
+         scotopic scale m_s (Eq. 3)    {}\n\
          rod weight k (Eq. 6)          {:.4}\n\
          acuity (Fig. 7)               {:.2} cycles/degree ({})\n\
          acuity blur (Eq. 7)           sigma {:.4} deg, {}\n",
-        o.adaptation_cd_m2,
-        o.scotopic_adaptation_cd_m2,
-        o.display_max_cd_m2,
-        o.display_adaptation_cd_m2,
-        o.cone_threshold_cd_m2,
-        o.rod_threshold_scotopic_cd_m2,
-        o.photopic_scale,
-        o.scotopic_scale,
+        num(o.adaptation_cd_m2),
+        num(o.scotopic_adaptation_cd_m2),
+        num(o.display_max_cd_m2),
+        num(o.display_adaptation_cd_m2),
+        num(o.cone_threshold_cd_m2),
+        num(o.rod_threshold_scotopic_cd_m2),
+        num(o.photopic_scale),
+        num(o.scotopic_scale),
         o.rod_weight,
         o.acuity_cycles_per_degree(),
         o.snellen(),
@@ -65,19 +66,19 @@ pub fn clipping_text(r: &Report, stats: &PixelStats) -> String {
     let n = (r.width * r.height).max(1);
     let share = 100.0 * stats.clipped as f64 / n as f64;
     let mut s = format!(
-        "clipped                       {} pixels ({share:.1} %) above the display maximum\n",
-        stats.clipped
+        "clipped                       {} ({share:.1} %) above the display maximum\n",
+        count(stats.clipped, "pixel", "pixels")
     );
     if share > 1.0 {
         let m = &r.mapping;
         s += &format!(
-            "  why: the model shows the highest visible luminance ({:.4e} cd/m²) at {:.1} cd/m² on \
+            "  why: the model shows the highest visible luminance ({} cd/m²) at {:.1} cd/m² on \
              a {} cd/m² display adapted to {} cd/m²: Eq. 1-4 keep the world observer's \
              contrast steps, and this display has fewer\n",
-            r.highest_visible_cd_m2,
+            num(r.highest_visible_cd_m2),
             r.highest_visible_display_cd_m2(),
-            m.display_max_cd_m2,
-            r.display_adaptation_cd_m2,
+            num(m.display_max_cd_m2),
+            num(r.display_adaptation_cd_m2),
         );
         s += &match r.display_max_to_show_highest_visible() {
             Some(d) => format!(
@@ -115,15 +116,15 @@ pub fn glare_text(r: &Report) -> String {
     let v = &g.veil;
     format!(
         "glare (CIE 135/1)             age {} years, pigmentation {}: {:.1} % of the light scattered\n\
-         veil at the fixation point    {:.4e} cd/m², {:.4e} scotopic cd/m² (mean {:.4e} cd/m²)\n\
-         adaptation without glare      {:.4e} cd/m² (with glare {:.3}× that)\n",
+         veil at the fixation point    {} cd/m², {} scotopic cd/m² (mean {} cd/m²)\n\
+         adaptation without glare      {} cd/m² (with glare {:.3}× that)\n",
         v.glare.age_years,
         v.glare.pigmentation,
         100.0 * v.scattered_fraction,
-        v.veil_at_centre_cd_m2,
-        v.veil_at_centre_scotopic_cd_m2,
-        v.mean_veil_cd_m2,
-        g.world_adaptation_without_glare_cd_m2,
+        num(v.veil_at_centre_cd_m2),
+        num(v.veil_at_centre_scotopic_cd_m2),
+        num(v.mean_veil_cd_m2),
+        num(g.world_adaptation_without_glare_cd_m2),
         g.adaptation_ratio(r),
     )
 }
@@ -148,11 +149,11 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
     };
     format!(
         "image                         {}x{}\n\
-         highest visible luminance     {:.4e} cd/m², {:.4e} scotopic cd/m² (scotopic {})\n\
-         world adaptation (Sec. 4.4)   {:.4e} cd/m² ({}), {:.4e} scotopic cd/m²\n\
+         highest visible luminance     {} cd/m², {} scotopic cd/m² (scotopic {})\n\
+         world adaptation (Sec. 4.4)   {} cd/m² ({}), {} scotopic cd/m²\n\
          display                       max {} cd/m², adaptation {} cd/m²\n\
-         thresholds (Eq. 4, 5)         cones {:.4e} cd/m², rods {:.4e} scotopic cd/m²\n\
-         scale factors (Eq. 3)         m_p {:.4e}, m_s {:.4e}\n\
+         thresholds (Eq. 4, 5)         cones {} cd/m², rods {} scotopic cd/m²\n\
+         scale factors (Eq. 3)         m_p {}, m_s {}\n\
          rod weight k (Eq. 6)          {:.4}\n\
          acuity (Fig. 7, Eq. 7)        {:.2} cycles/degree ({}), {}\n\
          view                          {} {:.1} deg ({}), {} pixels/degree\n\
@@ -160,18 +161,18 @@ pub fn map_text(r: &Report, stats: &PixelStats) -> String {
          white point                   {}\n",
         r.width,
         r.height,
-        r.highest_visible_cd_m2,
-        r.highest_visible_scotopic_cd_m2,
+        num(r.highest_visible_cd_m2),
+        num(r.highest_visible_scotopic_cd_m2),
         source(r.scotopic_source),
-        r.world_adaptation_cd_m2,
+        num(r.world_adaptation_cd_m2),
         source(r.world_adaptation_source),
-        r.world_adaptation_scotopic_cd_m2,
-        m.display_max_cd_m2,
-        r.display_adaptation_cd_m2,
-        r.cone_threshold_cd_m2,
-        r.rod_threshold_scotopic_cd_m2,
-        m.photopic_scale,
-        m.scotopic_scale,
+        num(r.world_adaptation_scotopic_cd_m2),
+        num(m.display_max_cd_m2),
+        num(r.display_adaptation_cd_m2),
+        num(r.cone_threshold_cd_m2),
+        num(r.rod_threshold_scotopic_cd_m2),
+        num(m.photopic_scale),
+        num(m.scotopic_scale),
         m.rod_weight,
         r.acuity.cutoff_cycles_per_degree,
         r.snellen(),
@@ -202,16 +203,16 @@ fn local_text(r: &Report) -> String {
     });
     format!(
         "local adaptation              radius {} deg, map grid every {} px, rod saturation {}\n\
-         local adaptation level        {:.4e} to {:.4e} cd/m² (1 %: {:.4e}, median {:.4e}, 99 %: {:.4e})\n\
+         local adaptation level        {} to {} cd/m² (1 %: {}, median {}, 99 %: {})\n\
          local rod weight k            {:.3} to {:.3} (median {:.3})\n{}",
         l.radius_deg,
         l.grid_step_px,
         if l.rod_saturation { "on" } else { "off" },
-        q.min,
-        q.max,
-        q.p01,
-        q.p50,
-        q.p99,
+        num(q.min),
+        num(q.max),
+        num(q.p01),
+        num(q.p50),
+        num(q.p99),
         k.min,
         k.max,
         k.p50,
@@ -227,54 +228,9 @@ pub fn map_line(input: &std::path::Path, output: &std::path::Path, r: &Report) -
         output.display(),
         r.width,
         r.height,
-        human(r.world_adaptation_cd_m2),
+        num(r.world_adaptation_cd_m2),
         source(r.world_adaptation_source),
-        human(r.mapping.rod_weight),
-        human(r.acuity.cutoff_cycles_per_degree),
+        num(r.mapping.rod_weight),
+        num(r.acuity.cutoff_cycles_per_degree),
     )
-}
-
-/// A number for people: four significant digits, without an exponent from 0.001 to a
-/// million (`1841`, `0.02512`), with one outside (`3.162e-5`).
-pub fn human(x: f64) -> String {
-    if x == 0.0 || !x.is_finite() {
-        return format!("{x}");
-    }
-    let magnitude = x.abs().log10().floor();
-    if (-3.0..6.0).contains(&magnitude) {
-        let decimals = (3.0 - magnitude).max(0.0) as usize;
-        let s = format!("{x:.decimals$}");
-        if s.contains('.') {
-            s.trim_end_matches('0').trim_end_matches('.').to_string()
-        } else {
-            s
-        }
-    } else {
-        let s = format!("{x:.3e}");
-        match s.split_once('e') {
-            Some((m, e)) if m.contains('.') => {
-                format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.'))
-            }
-            _ => s,
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::human;
-
-    #[test]
-    fn numbers_for_people() {
-        assert_eq!(human(1841.2), "1841");
-        assert_eq!(human(1.8412e3), "1841");
-        assert_eq!(human(5.0), "5");
-        assert_eq!(human(0.025119), "0.02512");
-        assert_eq!(human(0.001), "0.001");
-        assert_eq!(human(999_999.0), "999999");
-        assert_eq!(human(3.16227e-5), "3.162e-5");
-        assert_eq!(human(2.5e7), "2.5e7");
-        assert_eq!(human(-12.5), "-12.5");
-        assert_eq!(human(0.0), "0");
-    }
 }

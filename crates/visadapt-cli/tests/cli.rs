@@ -126,7 +126,7 @@ fn map_text_report_names_what_it_used() {
         .assert()
         .success()
         .stdout(predicate::str::contains("world adaptation"))
-        .stdout(predicate::str::contains("2.5000e-2 cd/m²"))
+        .stdout(predicate::str::contains("0.025 cd/m²"))
         .stdout(predicate::str::contains(
             "angular fisheye 180.0 deg (from the file)",
         ))

@@ -118,7 +118,11 @@ fn demo_levels_can_be_chosen_and_bad_levels_are_refused() {
         .arg(&out)
         .assert()
         .success()
-        .stdout(predicate::str::contains("50 "));
+        .stdout(predicate::str::contains("50 "))
+        // One panel is one (issue 13: "wrote 1 panels").
+        .stdout(predicate::str::contains(
+            "wrote 1 panel and contact-sheet.png",
+        ));
     assert_eq!(files_in(&out), ["contact-sheet.png", "panel-50.png"]);
     for bad in ["0", "-1", "nan", "inf", "1,0.0"] {
         let out = dir.path().join(format!("bad{bad}"));
@@ -280,6 +284,26 @@ fn plot_refuses_unknown_names_and_formats_without_writing() {
         .code(2);
     let e = cli_error(&run.get_output().stderr);
     assert!(e.contains("fig99") && e.contains("tvi"), "{e}");
+    // The list of accepted names has the figure numbers too (issue 13: they were accepted
+    // but the error listed only the long names).
+    let listed = e
+        .split_once("[possible values: ")
+        .and_then(|(_, rest)| rest.split_once(']'))
+        .map(|(list, _)| list.split(", ").collect::<Vec<_>>())
+        .unwrap_or_else(|| panic!("no list of names: {e}"));
+    for name in [
+        "tvi",
+        "fig2",
+        "fig3",
+        "fig4",
+        "fig7",
+        "fig8",
+        "fig9",
+        "fig10",
+        "timecourse",
+    ] {
+        assert!(listed.contains(&name), "{name} missing from {listed:?}");
+    }
     let run = visadapt()
         .args(["plot", "tvi", "-o"])
         .arg(dir.path().join("x.pdf"))

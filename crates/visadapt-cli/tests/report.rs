@@ -347,3 +347,117 @@ fn map_takes_the_acuity_threshold_rule() {
     assert!(run(&["--acuity-threshold", "envelope"]).contains("the paper's rule"));
     assert!(!run(&[]).contains("the paper's rule"));
 }
+
+/// A `w × h` grey EXR at `l` cd/m² (equal-energy, absolute units), one pixel `odd` if given.
+fn grey_exr(path: &std::path::Path, w: usize, h: usize, l: f32, odd: Option<f32>) {
+    let mut im = visadapt::HdrImage::zeros(w, h);
+    im.x.fill(l);
+    im.y.fill(l);
+    im.z.fill(l);
+    if let Some(v) = odd {
+        (im.x[0], im.y[0], im.z[0]) = (v, v, v);
+    }
+    im.absolute_units = true;
+    visadapt::io::exr::write_hdr(&im, &mut std::fs::File::create(path).unwrap()).unwrap();
+}
+
+/// Issue 13: text reports wrote `1.8412e3 cd/m²`; they now write numbers for people (four
+/// significant digits, no exponent from 0.001 to a million), while the JSON report keeps
+/// every digit. A grey field at 3682.4 cd/m²: the observer adapts to half of it (Sec. 4.4),
+/// 1841.2 cd/m², with the cone threshold of Eq. 4's Weber branch, L·10^-1.255 = 102.35.
+#[test]
+fn text_reports_write_numbers_for_people_and_json_keeps_every_digit() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bright.exr");
+    grey_exr(&input, 16, 16, 3682.4, None);
+    let out = dir.path().join("out.png");
+    let run = |extra: &[&str]| {
+        let o = visadapt()
+            .args(["map", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .args(["--fov", "10"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let l_wa = f64::from(3682.4f32) / 2.0;
+    let text = run(&[]);
+    assert!(
+        text.contains("highest visible luminance     3682 cd/m²"),
+        "{text}"
+    );
+    assert!(
+        text.contains("world adaptation (Sec. 4.4)   1841 cd/m²"),
+        "{text}"
+    );
+    let cones = format!("cones {:.1} cd/m²", tp(l_wa));
+    assert_eq!(cones, "cones 102.4 cd/m²");
+    assert!(text.contains(&cones), "{text}");
+    assert!(!text.contains("e3") && !text.contains("e2"), "{text}");
+    // JSON: the full value, not the four digits of the text.
+    let v = json(run(&["--json"]).as_bytes());
+    let got = v["adaptation_cd_m2"].as_f64().unwrap();
+    assert!((got - l_wa).abs() < 1e-9 * l_wa, "{got} vs {l_wa}");
+    assert!((got - 1841.0).abs() > 0.1, "{got}");
+    let t = v["cone_threshold_cd_m2"].as_f64().unwrap();
+    assert!((t / tp(l_wa) - 1.0).abs() < 1e-9, "{t}");
+    assert!((t - 102.4).abs() > 1e-3, "{t}");
+
+    // `observer 0.01`: the cone threshold of Eq. 4's middle branch, t_p(0.01) = 0.1933.
+    let o = visadapt().args(["observer", "0.01"]).output().unwrap();
+    let text = String::from_utf8(o.stdout).unwrap();
+    let expected = format!("cone threshold (Eq. 4)        {:.4} cd/m²", tp(0.01));
+    assert_eq!(&expected[30..], "0.1933 cd/m²");
+    assert!(text.contains(&expected), "{text}");
+    assert!(
+        text.contains("observer adapted to 0.01 cd/m² (0.02261 scotopic cd/m²)"),
+        "{text}"
+    );
+    let o = visadapt()
+        .args(["observer", "0.01", "--json"])
+        .output()
+        .unwrap();
+    let v = json(&o.stdout);
+    let t = v["cone_threshold_cd_m2"].as_f64().unwrap();
+    assert!((t / tp(0.01) - 1.0).abs() < 1e-12, "{t}");
+
+    // `tolerance`: the same field's threshold, 102.35 cd/m² everywhere.
+    let tol = dir.path().join("tol.exr");
+    let o = visadapt()
+        .args([
+            "tolerance",
+            input.to_str().unwrap(),
+            "-o",
+            tol.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        text.contains("adapted to 1841 cd/m² (from the image)")
+            && text.contains("min 102.4, median 102.4, max 102.4 cd/m²"),
+        "{text}"
+    );
+}
+
+/// Issue 13: counts agree with their noun ("1 pixels with NaN ..." before).
+#[test]
+fn one_pixel_is_one_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("nan.exr");
+    grey_exr(&input, 8, 8, 100.0, Some(f32::NAN));
+    let o = visadapt()
+        .args(["map", input.to_str().unwrap(), "-o"])
+        .arg(dir.path().join("out.png"))
+        .args(["--fov", "10"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(
+        err.contains(": 1 pixel with NaN or infinite values shown black"),
+        "{err}"
+    );
+}

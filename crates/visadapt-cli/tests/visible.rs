@@ -122,27 +122,39 @@ fn noise_is_reported_in_jnds_with_a_heat_map() {
     // 60° over 64 px: the acuity Gaussian is far below a pixel.
     assert_eq!(v["blur_sigma_px"], 0.0);
 
-    // The heat map: the image, then a colour bar panel; at least 240 px high.
+    // The heat map: the image, then a colour bar panel; at least 240 px high. The 64×32
+    // image is enlarged 7 times (224 rows, the most whole pixels within 240) and centred
+    // vertically, 8 rows above and below (issue 13: it sat unenlarged in the top corner).
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&map).unwrap()));
     let mut reader = decoder.read_info().unwrap();
     let (w, h) = (reader.info().width as usize, reader.info().height as usize);
-    assert_eq!((w, h), (64 + 150, 240));
+    assert_eq!((w, h), (7 * 64 + 150, 240));
     let mut rgb = vec![0u8; reader.output_buffer_size().unwrap()];
     reader.next_frame(&mut rgb).unwrap();
     let px = |x: usize, y: usize| {
         let i = (y * w + x) * 3;
         [rgb[i], rgb[i + 1], rgb[i + 2]]
     };
-    // 3 JND is red-magenta (inferno at 0.49), 0.5 JND dark purple (inferno at 0.23).
-    assert_eq!(px(10, 10), [185, 54, 85]);
-    assert_eq!(px(50, 10), [81, 15, 103]);
-    // Below the image: white. The bar: pale yellow at its top (100 JND), near-black at
-    // its bottom (0.1 JND); black label text beside it.
-    assert_eq!(px(10, 100), [255, 255, 255]);
-    let bar_x = 64 + 24;
+    // 3 JND is red-magenta (inferno at 0.49), 0.5 JND dark purple (inferno at 0.23): image
+    // pixel (x, y) covers the canvas from (7x, 8 + 7y) to (7x + 6, 8 + 7y + 6).
+    let at = |x: usize, y: usize, dx: usize, dy: usize| px(7 * x + dx, 8 + 7 * y + dy);
+    for (dx, dy) in [(0, 0), (6, 6), (3, 2)] {
+        assert_eq!(at(10, 10, dx, dy), [185, 54, 85]);
+        assert_eq!(at(50, 10, dx, dy), [81, 15, 103]);
+        assert_eq!(at(10, 0, dx, dy), [185, 54, 85]);
+        assert_eq!(at(50, 31, dx, dy), [81, 15, 103]);
+    }
+    // Above and below the image: white. The bar: pale yellow at its top (100 JND),
+    // near-black at its bottom (0.1 JND); black label text beside it.
+    for x in [0, 70, 447] {
+        for y in [0, 7, 232, 239] {
+            assert_eq!(px(x, y), [255, 255, 255], "({x}, {y})");
+        }
+    }
+    let bar_x = 7 * 64 + 24;
     assert_eq!(px(bar_x, 34), [252, 255, 164]);
     assert_eq!(px(bar_x, 226), [0, 0, 4]);
-    let dark_text = (64 + 40..w)
+    let dark_text = (7 * 64 + 40..w)
         .flat_map(|x| (0..h).map(move |y| (x, y)))
         .filter(|&(x, y)| px(x, y).iter().all(|&c| c < 80))
         .count();
@@ -167,7 +179,7 @@ fn text_report_names_the_results() {
     assert!(s.contains("50.000 % of the pixels at 1 JND or more"), "{s}");
     assert!(s.contains("mean 1.75"), "{s}");
     assert!(
-        s.contains("adapted to 5.0000e1 cd/m² (from the reference)"),
+        s.contains("adapted to 50 cd/m² (from the reference)"),
         "{s}"
     );
 }

@@ -2,6 +2,7 @@
 //! layout (X, Y, Z in cd/m², scotopic in scotopic cd/m²).
 
 use crate::cli::ChartArgs;
+use crate::numbers::num;
 use anyhow::{Context, bail};
 use visadapt::chart::{Chart, ChartOptions};
 use visadapt::io;
@@ -36,13 +37,13 @@ pub fn run(args: ChartArgs) -> anyhow::Result<()> {
     let view = image.view.expect("the chart has a view");
     let smallest = chart.layout.lines.last().expect("the chart has lines");
     println!(
-        "chart                         {}x{} pixels, white {} cd/m² (scotopic {:.4e})",
+        "chart                         {}x{} pixels, white {} cd/m² (scotopic {})",
         image.width,
         image.height,
-        args.white,
-        chart.layout.patches[visadapt::chart::WHITE_PATCH]
+        num(args.white),
+        num(chart.layout.patches[visadapt::chart::WHITE_PATCH]
             .photometry
-            .scotopic,
+            .scotopic),
     );
     println!(
         "view                          {:.3} m away, {:.2} pixels/degree, horizontal fov {:.4} deg",

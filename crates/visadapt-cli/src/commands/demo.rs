@@ -5,6 +5,7 @@
 
 use crate::cli::DemoArgs;
 use crate::graphics;
+use crate::numbers::{count, sig};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::style::RGBColor;
@@ -104,8 +105,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
 
     print!("{}", table(&panels));
     println!(
-        "wrote {} panels and contact-sheet.png in {}",
-        panels.len(),
+        "wrote {} and contact-sheet.png in {}",
+        count(panels.len(), "panel", "panels"),
         args.output.display()
     );
     for line in &written {
@@ -266,10 +267,9 @@ fn table(panels: &[Panel]) -> String {
     s
 }
 
-/// A luminance with three significant digits, without exponent (500, 5.00, 0.0200).
+/// A luminance with three significant digits (500, 5, 0.02, 0.0005).
 fn luminance(v: f64) -> String {
-    let decimals = (2.0 - v.log10().floor()).clamp(0.0, 12.0) as usize;
-    format!("{v:.decimals$}")
+    sig(v, 3).to_string()
 }
 
 /// The labels of one panel on the contact sheet.

@@ -7,6 +7,7 @@
 //! the report then goes to standard error.
 
 use crate::cli::{FormatArg, MapArgs};
+use crate::numbers::count;
 use crate::report;
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -126,16 +127,16 @@ fn map_file(
     let stats = out.stats;
     if stats.non_finite > 0 {
         log::warn!(
-            "{}: {} pixels with NaN or infinite values shown black",
+            "{}: {} with NaN or infinite values shown black",
             input.display(),
-            stats.non_finite
+            count(stats.non_finite, "pixel", "pixels")
         );
     }
     if stats.negative > 0 {
         log::warn!(
-            "{}: {} pixels with negative values, read as 0",
+            "{}: {} with negative values, read as 0",
             input.display(),
-            stats.negative
+            count(stats.negative, "pixel", "pixels")
         );
     }
 
@@ -264,7 +265,11 @@ fn run_batch(
     })?;
     bar.finish_and_clear();
     if failed > 0 {
-        bail!("{failed} of {n} inputs failed ({} written)", n - failed);
+        bail!(
+            "{failed} of {} failed ({} written)",
+            count(n, "input", "inputs"),
+            n - failed
+        );
     }
     Ok(())
 }

@@ -3,6 +3,7 @@
 
 use super::timecourse::{positive, sorted_times};
 use crate::cli::SequenceArgs;
+use crate::numbers::num;
 use anyhow::{Context, bail};
 use std::path::PathBuf;
 use visadapt::operator::ViewingConditions;
@@ -137,18 +138,24 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        println!("scene lit at {from} cd/m², then {to} cd/m² (highest visible luminance)");
+        println!(
+            "scene lit at {} cd/m², then {} cd/m² (highest visible luminance)",
+            num(from),
+            num(to)
+        );
         if let Some((text, _)) = &white {
             println!("white point: {text}");
         }
         for (p, t, mp, b) in &written {
             let when = match t {
-                Some(t) => format!("t = {t} s"),
+                Some(t) => format!("t = {} s", num(*t)),
                 None => "adapted, before the switch".to_string(),
             };
             println!(
-                "{:<40} {when:<28} m_p {mp:.4e}  b {b:.4e} cd/m²",
-                p.display().to_string()
+                "{:<40} {when:<28} m_p {}  b {} cd/m²",
+                p.display().to_string(),
+                num(*mp),
+                num(*b)
             );
         }
         if let Some(p) = &args.apng {

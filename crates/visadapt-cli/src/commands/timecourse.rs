@@ -2,6 +2,7 @@
 //! adapted to one luminance at given times after it changes to another (Sec. 3.5, Eq. 8–9).
 
 use crate::cli::TimecourseArgs;
+use crate::numbers::num;
 use anyhow::bail;
 use visadapt::report;
 use visadapt::scotopic::EQUAL_ENERGY_SP_RATIO;
@@ -57,9 +58,12 @@ pub fn run(args: TimecourseArgs) -> anyhow::Result<()> {
 
 fn text(from: f64, to: f64, display_max: f64, moments: &[Moment]) -> String {
     let mut s = format!(
-        "observer adapted to {from:.4e} cd/m², switched to {to:.4e} cd/m² at t = 0 \
-         (scotopic = photopic x {EQUAL_ENERGY_SP_RATIO}), display {display_max} cd/m²\n\
+        "observer adapted to {} cd/m², switched to {} cd/m² at t = 0 \
+         (scotopic = photopic x {EQUAL_ENERGY_SP_RATIO}), display {} cd/m²\n\
          {:>10} {:>11} {:>11} {:>8} {:>8} {:>11} {:>11} {:>6} {:>11} {:>7}\n",
+        num(from),
+        num(to),
+        num(display_max),
         "t (s)",
         "cone thr",
         "rod thr",
@@ -74,16 +78,16 @@ fn text(from: f64, to: f64, display_max: f64, moments: &[Moment]) -> String {
     for m in moments {
         let map = &m.mapping;
         s += &format!(
-            "{:>10.3} {:>11.4e} {:>11.4e} {:>8.3} {:>8.3} {:>11.4e} {:>11.4e} {:>6.3} {:>11.4e} {:>7.2}\n",
+            "{:>10.3} {:>11} {:>11} {:>8.3} {:>8.3} {:>11} {:>11} {:>6.3} {:>11} {:>7.2}\n",
             m.t_seconds,
-            m.cone_threshold_cd_m2,
-            m.rod_threshold_scotopic_cd_m2,
+            num(m.cone_threshold_cd_m2),
+            num(m.rod_threshold_scotopic_cd_m2),
             m.cone_excess_log,
             m.rod_excess_log,
-            map.photopic_scale,
-            map.scotopic_scale,
+            num(map.photopic_scale),
+            num(map.scotopic_scale),
             map.rod_weight,
-            map.photopic_offset_cd_m2 + map.rod_weight * map.scotopic_offset_cd_m2,
+            num(map.photopic_offset_cd_m2 + map.rod_weight * map.scotopic_offset_cd_m2),
             m.acuity_cycles_per_degree,
         );
     }

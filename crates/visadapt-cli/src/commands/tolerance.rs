@@ -3,6 +3,7 @@
 //! Ferwerda et al. 1996 Eq. 4–6), written as a one-channel OpenEXR in cd/m².
 
 use crate::cli::ToleranceArgs;
+use crate::numbers::num;
 use anyhow::{Context, bail};
 use std::path::Path;
 use visadapt::io;
@@ -63,20 +64,22 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
-            "observer (Sec. 4.4)           adapted to {:.4e} cd/m² ({}), {:.4e} scotopic cd/m²",
-            report.world_adaptation_cd_m2,
+            "observer (Sec. 4.4)           adapted to {} cd/m² ({}), {} scotopic cd/m²",
+            num(report.world_adaptation_cd_m2),
             if given { "given" } else { "from the image" },
-            report.world_adaptation_scotopic_cd_m2
+            num(report.world_adaptation_scotopic_cd_m2)
         );
         println!(
-            "thresholds (Eq. 4, 5, 6)      cones {:.4e} cd/m², rods {:.4e} scotopic cd/m², rod weight k {:.3}",
-            report.cone_threshold_cd_m2,
-            report.rod_threshold_scotopic_cd_m2,
+            "thresholds (Eq. 4, 5, 6)      cones {} cd/m², rods {} scotopic cd/m², rod weight k {:.3}",
+            num(report.cone_threshold_cd_m2),
+            num(report.rod_threshold_scotopic_cd_m2),
             report.mapping.rod_weight
         );
         println!(
-            "tolerance                     min {:.4e}, median {:.4e}, max {:.4e} cd/m²",
-            summary.min_cd_m2, summary.median_cd_m2, summary.max_cd_m2
+            "tolerance                     min {}, median {}, max {} cd/m²",
+            num(summary.min_cd_m2),
+            num(summary.median_cd_m2),
+            num(summary.max_cd_m2)
         );
         if let Some(r) = summary.median_relative {
             println!(

@@ -21,6 +21,7 @@
 //! written, nothing after it is, and the error names its frame.
 
 use crate::cli::{VideoArgs, VideoFormat};
+use crate::numbers::count;
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -214,7 +215,11 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     })?;
     progress.finish_and_clear();
     if !args.json {
-        println!("wrote {} frames to {}", frames.len(), args.output.display());
+        println!(
+            "wrote {} to {}",
+            count(frames.len(), "frame", "frames"),
+            args.output.display()
+        );
     }
     Ok(())
 }

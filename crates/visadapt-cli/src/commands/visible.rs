@@ -5,6 +5,7 @@
 
 use crate::cli::VisibleArgs;
 use crate::graphics;
+use crate::numbers::{count, num};
 use anyhow::{Context, bail};
 use plotters::style::RGBColor;
 use std::path::Path;
@@ -58,8 +59,8 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     let report = &report;
     if d.non_finite_pixels > 0 {
         log::warn!(
-            "{} pixels with NaN or infinite values read as black",
-            d.non_finite_pixels
+            "{} with NaN or infinite values read as black",
+            count(d.non_finite_pixels, "pixel", "pixels")
         );
     }
     if let (Some(out), Some(format)) = (&args.output, map_format) {
@@ -142,22 +143,22 @@ fn text_report(d: &Difference, r: &Report) -> String {
     };
     format!(
         "images                        {}x{}\n\
-         observer (Sec. 4.4)           adapted to {:.4e} cd/m² ({}), {:.4e} scotopic cd/m²\n\
-         thresholds (Eq. 4, 5, 6)      cones {:.4e} cd/m², rods {:.4e} scotopic cd/m², rod weight k {:.3}\n\
+         observer (Sec. 4.4)           adapted to {} cd/m² ({}), {} scotopic cd/m²\n\
+         thresholds (Eq. 4, 5, 6)      cones {} cd/m², rods {} scotopic cd/m², rod weight k {:.3}\n\
          acuity (Eq. 7)                {:.2} cycles/degree, blur {} ({:.1} deg field)\n\
          visible difference            {:.3} % of the pixels at 1 JND or more\n\
          JND                           mean {:.4}, max {:.4}\n",
         d.width,
         d.height,
-        r.world_adaptation_cd_m2,
+        num(r.world_adaptation_cd_m2),
         if r.world_adaptation_source == visadapt::operator::Source::Caller {
             "given"
         } else {
             "from the reference"
         },
-        r.world_adaptation_scotopic_cd_m2,
-        r.cone_threshold_cd_m2,
-        r.rod_threshold_scotopic_cd_m2,
+        num(r.world_adaptation_scotopic_cd_m2),
+        num(r.cone_threshold_cd_m2),
+        num(r.rod_threshold_scotopic_cd_m2),
         r.mapping.rod_weight,
         r.acuity.cutoff_cycles_per_degree,
         blur,
@@ -209,12 +210,25 @@ pub fn jnd_colour(jnd: f32) -> [u8; 3] {
 
 /// Smallest height of the picture, so that the colour bar and its labels fit.
 const MIN_HEIGHT: usize = 240;
+/// A map lower than [`MIN_HEIGHT`] is enlarged, but not beyond this width.
+const MAX_ENLARGED_WIDTH: usize = 1024;
 
-/// The heat map of `d` (one pixel per image pixel) with a logarithmic colour bar and its
-/// labels to the right, on white: `(width, height, interleaved sRGB)`.
+/// How many times a `w × h` map is enlarged (whole pixels, so each JND keeps its colour):
+/// as often as it fits in [`MIN_HEIGHT`] and [`MAX_ENLARGED_WIDTH`], at least once.
+fn enlargement(w: usize, h: usize) -> usize {
+    (MIN_HEIGHT / h.max(1))
+        .min(MAX_ENLARGED_WIDTH / w.max(1))
+        .max(1)
+}
+
+/// The heat map of `d` (each image pixel a square of [`enlargement`] pixels, the map
+/// centred vertically) with a logarithmic colour bar and its labels to the right, on
+/// white: `(width, height, interleaved sRGB)`.
 fn heat_map(d: &Difference) -> anyhow::Result<(u32, u32, Vec<u8>)> {
-    let (w, h) = (d.width, d.height);
+    let n = enlargement(d.width, d.height);
+    let (w, h) = (d.width * n, d.height * n);
     let canvas_h = h.max(MIN_HEIGHT);
+    let map_top = (canvas_h - h) / 2;
     // Text and bar grow with the picture, up to 4×.
     let s = (canvas_h as f64 / MIN_HEIGHT as f64).clamp(1.0, 4.0);
     let px = |v: f64| (v * s).round() as usize;
@@ -231,9 +245,10 @@ fn heat_map(d: &Difference) -> anyhow::Result<(u32, u32, Vec<u8>)> {
         let i = (y * canvas_w + x) * 3;
         rgb[i..i + 3].copy_from_slice(&c);
     };
-    for (y, row) in d.jnd.chunks_exact(w).enumerate() {
-        for (x, &j) in row.iter().enumerate() {
-            put(x, y, jnd_colour(j));
+    for y in 0..h {
+        let row = &d.jnd[y / n * d.width..][..d.width];
+        for x in 0..w {
+            put(x, map_top + y, jnd_colour(row[x / n]));
         }
     }
 
@@ -294,6 +309,16 @@ fn heat_map(d: &Difference) -> anyhow::Result<(u32, u32, Vec<u8>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn small_maps_are_enlarged_to_the_bar_height_within_a_width() {
+        assert_eq!(enlargement(64, 32), 7);
+        assert_eq!(enlargement(128, 72), 3);
+        assert_eq!(enlargement(800, 800), 1);
+        assert_eq!(enlargement(600, 10), 1);
+        assert_eq!(enlargement(1, 1), 240);
+        assert_eq!(enlargement(0, 0), 240);
+    }
 
     #[test]
     fn colour_scale_is_logarithmic_and_clamped() {
