@@ -86,7 +86,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
             let playback =
                 render_sequence(&chart, name, seq, &args.output, &conditions, &progress)?;
             let pace = playback.speedup.map_or(String::new(), |x| {
-                format!(" ({}x real time)", crate::report::human(x))
+                format!(" ({}x real time)", crate::numbers::num(x))
             });
             written.push(format!(
                 "  {what} (Fig. 12): {} -> {} cd/m², frames {name}-0.png (adapted) to {name}-{}.png at {} s, animated {name}.apng{pace}",

@@ -162,8 +162,8 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
             let pace = match playback.speedup {
                 Some(x) => format!(
                     "the real time steps {} times faster, first and last frames held {} s",
-                    crate::report::human(x),
-                    crate::report::human(f64::from(playback.delays_ms[0]) / 1000.0)
+                    num(x),
+                    num(f64::from(playback.delays_ms[0]) / 1000.0)
                 ),
                 None => "every frame for the same time".to_string(),
             };
@@ -171,7 +171,7 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
                 "animation: {} ({} frames in {} s: {pace})",
                 p.display(),
                 count,
-                crate::report::human(playback.seconds())
+                num(playback.seconds())
             );
         }
     }
