@@ -41,15 +41,20 @@
 //! The IIR runs 32 lanes at once with their states in registers (four AVX2 vectors;
 //! enough independent recursions to hide each step's latency): down strips of columns,
 //! a band of 32 rows at a time for each block of lanes so that the band stays in cache,
-//! and along rows interleaved 32 at a time by blocked 8×8 transposes. The FIR adds the symmetric taps'
-//! sample pairs first (half the multiplies), accumulates 32 outputs at once in
-//! registers, and filters columns from a copy of one strip (in cache) rather than of
-//! the plane; its kernels are compiled for AVX2/FMA as well as for the baseline target
-//! and chosen at run time (see `simd`; outputs differ by rounding only, within 4 ulp,
-//! tested; the IIR's within 1e-5 relative, as the recursion carries the rounding
-//! differences along). With the default feature `rayon` the rows, strips and planes run on the
-//! rayon pool (images under 32768 samples stay on the calling thread), otherwise
-//! sequentially; the results are bit-identical either way.
+//! and along rows interleaved 32 at a time by blocked 8×8 transposes. The FIR adds the
+//! symmetric taps' sample pairs first (half the multiplies), accumulates a block of
+//! outputs at once in registers (eight vectors: 64 samples with AVX2, 128 with
+//! AVX-512), and runs as one pass over the rows (`exact_pass`): each row is filtered
+//! along itself into a ring of the last `2R + 1` rows (in cache, rows aligned to cache
+//! lines) and each output row is filtered down the ring and written once, so a plane
+//! makes one trip through memory; the operator fuses its mapping and clipping into the
+//! same pass. Its kernels are compiled for AVX-512, AVX2/FMA and the baseline target and
+//! chosen at run time (see `simd`; outputs differ by rounding only, within 4 ulp,
+//! tested, AVX-512 and AVX2 bit for bit; the IIR's within 1e-5 relative, as the
+//! recursion carries the rounding differences along). With the default feature `rayon`
+//! the rows, strips, segments of rows and planes run on the rayon pool (images under
+//! 32768 samples stay on the calling thread), otherwise sequentially; the results are
+//! bit-identical either way.
 //!
 //! # Boundary
 //!
@@ -115,6 +120,7 @@ use crate::simd::Isa;
 macro_rules! with_isa {
     ($isa:expr, $($f:ident)::+ ($($a:expr),* $(,)?)) => {
         match $isa {
+            Isa::Avx512Fma => Isa::Avx512Fma.run(|| $($f)::+::<true>($($a),*)),
             Isa::Avx2Fma => Isa::Avx2Fma.run(|| $($f)::+::<true>($($a),*)),
             Isa::Baseline => $($f)::+::<false>($($a),*),
         }
@@ -139,9 +145,6 @@ const ROW_BLOCK: usize = 32;
 
 /// Below this many samples everything runs on the calling thread (about 0.2 ms of work).
 const PARALLEL_MIN_SAMPLES: usize = 1 << 15;
-
-/// Columns per strip in the exact kernel's vertical pass.
-const STRIP: usize = 64;
 
 /// Columns per strip in the recursive filter's vertical pass (several blocks of lanes
 /// cross each band of rows while it is in cache).
@@ -186,6 +189,46 @@ pub fn gaussian_blur_planes(planes: &mut [&mut [f32]], width: usize, height: usi
         sigma_px,
     );
 }
+
+/// How far, in pixels along a row or a column, a sample reaches in [`gaussian_blur`] with
+/// `sigma_px`: the blur of any rectangle of a plane (with its replicated boundary) that
+/// holds every pixel within this distance of pixel `p`, horizontally and vertically, gives
+/// `p` the value of the blur of the whole plane to within `tolerance` times the range
+/// (largest minus smallest sample) of the plane. For a spatially restricted blur (see
+/// [`crate::local::acuity`]).
+///
+/// Below [`IIR_MIN_SIGMA_PX`] the kernel is finite and this is its radius, whatever the
+/// tolerance: the rectangle's values are the plane's bit for bit (the kernel's operations
+/// do not depend on the position in the row). From it on, the recursive filter's step
+/// response beyond a distance `d` is below `3·e^(−1.7·d/σ)` (measured from 2σ to 20σ for
+/// σ = 3 to 30: the step response is 3.3e-2 at 2σ, 1.5e-7 at 8σ, 1.1e-16 at 20σ, and
+/// decays faster as σ grows; tested), and a replicated edge replaces at most the range on
+/// each of the four sides (row pass, then column pass over rows already off by at most
+/// twice that), so the error is below `12·e^(−1.7·d/σ)` times the range. `0` for a sigma
+/// with no blur; `usize::MAX` for a tolerance that is not positive.
+pub fn reach_px(sigma_px: f32, tolerance: f64) -> usize {
+    let Some(sigma) = effective_sigma(sigma_px) else {
+        return 0;
+    };
+    if sigma < f64::from(IIR_MIN_SIGMA_PX) {
+        return fir::half_kernel(sigma).len() - 1;
+    }
+    if tolerance.is_nan() || tolerance <= 0.0 {
+        return usize::MAX;
+    }
+    let d = sigma / IIR_TAIL_RATE * (IIR_TAIL_FACTOR * 4.0 / tolerance).ln();
+    if d.is_finite() {
+        d.ceil().max(0.0) as usize
+    } else {
+        usize::MAX
+    }
+}
+
+/// The recursive filter's step response beyond `d` pixels is below
+/// `IIR_TAIL_FACTOR · e^(−IIR_TAIL_RATE · d/σ)` (measured, see [`reach_px`]).
+const IIR_TAIL_FACTOR: f64 = 3.0;
+/// See [`IIR_TAIL_FACTOR`].
+const IIR_TAIL_RATE: f64 = 1.7;
 
 /// Whether to use the rayon pool (when the feature is on).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -262,21 +305,180 @@ fn blur_with(exec: Exec, isa: Isa, plane: &mut [f32], width: usize, height: usiz
 }
 
 fn blur_fir(exec: Exec, isa: Isa, plane: &mut [f32], width: usize, height: usize, sigma: f64) {
+    exact_pass_with(
+        exec,
+        isa,
+        sigma,
+        width,
+        height,
+        [plane],
+        true,
+        |_, [prior], [row]| row.copy_from_slice(prior),
+        |_, _| (),
+        |(), ()| (),
+    );
+}
+
+/// Whether a blur of `sigma_px` over a `width × height` plane is done by the exact kernel
+/// (and so can be run by [`exact_pass`]).
+pub(crate) fn uses_exact_kernel(sigma_px: f32, width: usize, height: usize) -> bool {
+    width.checked_mul(height).is_some_and(|n| n > 0)
+        && effective_sigma(sigma_px).is_some_and(|s| s < f64::from(IIR_MIN_SIGMA_PX))
+}
+
+/// The exact-kernel blur of `sigma_px` as one pass over rows, with the stage before it
+/// and the stage after it fused in: `fill(y, prior, rows)` writes input row `y` of each of
+/// the `P` planes into `rows` (`prior`: what the planes held at row `y` before the pass
+/// when `in_place`, empty slices otherwise), and `finish(y, rows)` sees (and may change)
+/// output row `y` of the planes, blurred, once it is written there. Each input row is
+/// read once per segment of rows and the output written once, with no copy of a plane:
+/// for the operator, one trip through memory instead of one per stage. Returns the sum
+/// (`add`) of `fill`'s results over the image's rows and `finish`'s.
+///
+/// The output equals, bit for bit, `fill` over the whole planes followed by
+/// [`gaussian_blur_planes`] and `finish` (tested), whatever the split into parallel
+/// segments. Requires [`uses_exact_kernel`].
+///
+/// # Panics
+/// If a plane's length is not `width * height`, or the blur is not the exact kernel's.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn exact_pass<const P: usize, S: Default + Send>(
+    sigma_px: f32,
+    width: usize,
+    height: usize,
+    planes: [&mut [f32]; P],
+    in_place: bool,
+    fill: impl Fn(usize, [&[f32]; P], [&mut [f32]; P]) -> S + Sync,
+    finish: impl Fn(usize, [&mut [f32]; P]) -> S + Sync,
+    add: impl Fn(S, S) -> S + Sync + Send,
+) -> S {
+    assert!(
+        uses_exact_kernel(sigma_px, width, height),
+        "exact_pass: sigma {sigma_px} on {width}×{height} is not the exact kernel's"
+    );
+    let sigma = effective_sigma(sigma_px).expect("a positive sigma");
+    exact_pass_with(
+        Exec::for_samples(P * width * height),
+        Isa::detect(),
+        sigma,
+        width,
+        height,
+        planes,
+        in_place,
+        fill,
+        finish,
+        add,
+    )
+}
+
+/// Rows per segment of an exact pass, at least this many radii (each segment also
+/// reads a radius of rows beyond each end).
+const SEGMENT_MIN_RADII: usize = 8;
+
+/// [`exact_pass`] with the execution and instruction set given.
+#[allow(clippy::too_many_arguments)]
+fn exact_pass_with<const P: usize, S: Default + Send>(
+    exec: Exec,
+    isa: Isa,
+    sigma: f64,
+    width: usize,
+    height: usize,
+    planes: [&mut [f32]; P],
+    in_place: bool,
+    fill: impl Fn(usize, [&[f32]; P], [&mut [f32]; P]) -> S + Sync,
+    finish: impl Fn(usize, [&mut [f32]; P]) -> S + Sync,
+    add: impl Fn(S, S) -> S + Sync + Send,
+) -> S {
+    for p in &planes {
+        check_len(p.len(), width, height);
+    }
+    if width == 0 || height == 0 {
+        return S::default();
+    }
     let half = fir::half_kernel(sigma);
     let half = &half[..];
-    // A 1-pixel-wide row or column is constant along it: nothing to do.
-    if width > 1 {
-        for_each_chunk(exec, plane, width, Vec::new, |pad, _, row| {
-            with_isa!(isa, fir::row(half, row, pad))
-        });
+    let r = half.len() - 1;
+    let w = width;
+    // Two segments per thread, each of several radii of rows.
+    let segments = match exec {
+        Exec::Sequential => 1,
+        Exec::Parallel => threads() * 2,
     }
-    if height > 1 {
-        let strips = column_strips(plane, width, STRIP);
-        let r = half.len() - 1;
-        for_each_item(exec, strips, Vec::new, |scratch, mut segs| {
-            fir::fill_strip(&segs, r, scratch);
-            with_isa!(isa, fir::column_strip(half, scratch, &mut segs));
-        });
+    .min(height / (SEGMENT_MIN_RADII * r))
+    .max(1);
+    let rows_per = height.div_ceil(segments);
+    // In place, the rows each segment reads beyond its own, saved before any is written.
+    let save = |from: usize, to: usize| -> [Vec<f32>; P] {
+        std::array::from_fn(|p| {
+            if in_place {
+                planes[p][from * w..to * w].to_vec()
+            } else {
+                Vec::new()
+            }
+        })
+    };
+    let bounds: Vec<(usize, usize)> = (0..height)
+        .step_by(rows_per)
+        .map(|a| (a, (a + rows_per).min(height)))
+        .collect();
+    let saved: Vec<_> = bounds
+        .iter()
+        .map(|&(a, b)| {
+            let above = a.saturating_sub(r);
+            ((above, save(above, a)), save(b, (b + r).min(height)))
+        })
+        .collect();
+    let mut chunks = planes.map(|p| p.chunks_mut(rows_per * w));
+    let segs: Vec<fir::Segment<'_, P>> = bounds
+        .iter()
+        .zip(saved)
+        .map(|(&(start, _), (above, below))| fir::Segment {
+            start,
+            rows: chunks
+                .each_mut()
+                .map(|c| c.next().expect("a chunk per segment")),
+            above,
+            below,
+        })
+        .collect();
+    macro_rules! segment {
+        ($fma:literal, $lanes:expr, $seg:expr) => {
+            fir::segment::<$fma, { $lanes }, P, S>(
+                half,
+                width,
+                height,
+                in_place,
+                $seg,
+                &fill,
+                &finish,
+                &add,
+                S::default(),
+            )
+        };
+    }
+    // One closure per level, so that each is compiled inside its target-feature function
+    // (a closure called from two is compiled outside both).
+    let run = |seg| match isa {
+        Isa::Avx512Fma => Isa::Avx512Fma.run(|| segment!(true, fir::LANES_AVX512, seg)),
+        Isa::Avx2Fma => Isa::Avx2Fma.run(|| segment!(true, fir::LANES_AVX2, seg)),
+        Isa::Baseline => segment!(false, fir::LANES_BASELINE, seg),
+    };
+    match exec {
+        #[cfg(feature = "rayon")]
+        Exec::Parallel => segs.into_par_iter().map(run).reduce(S::default, &add),
+        _ => segs.into_iter().map(run).fold(S::default(), &add),
+    }
+}
+
+/// Threads of the pool the parallel passes run on.
+fn threads() -> usize {
+    #[cfg(feature = "rayon")]
+    {
+        rayon::current_num_threads()
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        1
     }
 }
 
@@ -399,9 +601,19 @@ fn deinterleave<const FMA: bool>(buf: &[[f32; ROW_BLOCK]], rows: &mut [&mut [f32
 /// kernel compiled for `isa` and states in precision `prec`.
 fn iir_filter<R: AsMut<[f32]>>(d: &iir::Design, isa: Isa, prec: iir::Precision, rows: &mut [R]) {
     use iir::{Precision, filter_rows};
+    // The recursion's 32 lanes are four AVX2 vectors; AVX-512 runs the AVX2 build.
+    let isa = if isa == Isa::Avx512Fma {
+        Isa::Avx2Fma
+    } else {
+        isa
+    };
     match (isa, prec) {
-        (Isa::Avx2Fma, Precision::F32) => Isa::Avx2Fma.run(|| filter_rows::<f32, true, R>(d, rows)),
-        (Isa::Avx2Fma, Precision::F64) => Isa::Avx2Fma.run(|| filter_rows::<f64, true, R>(d, rows)),
+        (Isa::Avx512Fma | Isa::Avx2Fma, Precision::F32) => {
+            Isa::Avx2Fma.run(|| filter_rows::<f32, true, R>(d, rows))
+        }
+        (Isa::Avx512Fma | Isa::Avx2Fma, Precision::F64) => {
+            Isa::Avx2Fma.run(|| filter_rows::<f64, true, R>(d, rows))
+        }
         (Isa::Baseline, Precision::F32) => filter_rows::<f32, false, R>(d, rows),
         (Isa::Baseline, Precision::F64) => filter_rows::<f64, false, R>(d, rows),
     }
@@ -960,6 +1172,72 @@ mod tests {
         }
     }
 
+    /// The exact kernel written out: each output sample is [`fir::tap_sum`] along its
+    /// row (replicated ends), then down its column, one sample at a time.
+    fn separable_reference<const FMA: bool>(
+        src: &[f32],
+        w: usize,
+        h: usize,
+        sigma: f64,
+    ) -> Vec<f32> {
+        let half = fir::half_kernel(sigma);
+        let at = |i: isize, n: usize| i.clamp(0, n as isize - 1) as usize;
+        let mut rows = src.to_vec();
+        if w > 1 {
+            for y in 0..h {
+                for x in 0..w {
+                    rows[y * w + x] =
+                        fir::tap_sum::<FMA>(&half, |d| src[y * w + at(x as isize + d, w)]);
+                }
+            }
+        }
+        let mut out = rows.clone();
+        if h > 1 {
+            for y in 0..h {
+                for x in 0..w {
+                    out[y * w + x] =
+                        fir::tap_sum::<FMA>(&half, |d| rows[at(y as isize + d, h) * w + x]);
+                }
+            }
+        }
+        out
+    }
+
+    /// The one-pass exact kernel (rows through a ring, in parallel segments, in place)
+    /// equals the separable convolution written out, bit for bit, on both instruction
+    /// sets, for sizes with one and with several segments and widths with every block
+    /// width of the vectorised loops.
+    #[test]
+    fn exact_pass_equals_the_separable_convolution() {
+        for (w, h) in [
+            (1, 1),
+            (1, 37),
+            (37, 1),
+            (2, 2),
+            (75, 300),
+            (301, 90),
+            (8, 200),
+        ] {
+            let src = test_image(w, h);
+            for sigma in [0.2f32, 0.45, 1.0, 2.19, 2.99] {
+                for isa in Isa::all_available() {
+                    for exec in [Exec::Sequential, Exec::Parallel] {
+                        let mut v = src.clone();
+                        blur_with(exec, isa, &mut v, w, h, sigma);
+                        let s = f64::from(sigma);
+                        let want = if isa.fma() {
+                            separable_reference::<true>(&src, w, h, s)
+                        } else {
+                            separable_reference::<false>(&src, w, h, s)
+                        };
+                        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(&v), bits(&want), "{w}×{h} σ {sigma} {isa:?} {exec:?}");
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn fir_and_iir_agree_at_the_switch() {
         let (w, h) = (120, 90);
@@ -1049,5 +1327,92 @@ mod tests {
                 "HDR σ {sigma:4}: min {min:.6e}, background within 1 % from {along:?} σ along the row, {diag:?} σ diagonally"
             );
         }
+    }
+
+    /// The recursive filter's step response stays under the bound [`reach_px`] rests on.
+    #[test]
+    fn iir_step_tail_is_under_the_reach_bound() {
+        for sigma in [3.0f32, 4.5, 6.0, 10.0, 30.0, 100.0] {
+            let w = (50.0 * sigma) as usize;
+            let edge = w / 4;
+            let mut p: Vec<f32> = (0..w).map(|x| if x < edge { 1.0 } else { 0.0 }).collect();
+            gaussian_blur(&mut p, w, 1, sigma);
+            for k in 4..=40 {
+                let d = f64::from(k) / 2.0 * f64::from(sigma);
+                let v = f64::from(p[edge - 1 + d as usize]);
+                let bound = IIR_TAIL_FACTOR
+                    * (-IIR_TAIL_RATE * (d as usize) as f64 / f64::from(sigma)).exp();
+                assert!(v <= bound, "σ {sigma}, d {d}: {v:e} > {bound:e}");
+            }
+        }
+    }
+
+    /// A rectangle holding the reach of its core blurs the core as the whole plane does:
+    /// bit for bit with the exact kernel, within the tolerance times the range with the
+    /// recursive one.
+    #[test]
+    fn blur_of_a_rectangle_within_reach_matches_the_plane() {
+        let (w, h) = (300, 260);
+        let mut seed = 7u32;
+        let plane: Vec<f32> = (0..w * h)
+            .map(|i| {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                // A bright block on noise: a range of 1000.
+                let (x, y) = (i % w, i / w);
+                let base = (seed >> 8) as f32 / (1u32 << 24) as f32;
+                if (20..60).contains(&x) && (200..240).contains(&y) {
+                    1000.0
+                } else {
+                    base
+                }
+            })
+            .collect();
+        let range = 1000.0f64;
+        let (cx0, cx1, cy0, cy1) = (120usize, 170usize, 100usize, 140usize);
+        let crop_error = |sigma: f32, m: usize| {
+            let mut full = plane.clone();
+            gaussian_blur(&mut full, w, h, sigma);
+            let (x0, x1) = (cx0.saturating_sub(m), (cx1 + m).min(w));
+            let (y0, y1) = (cy0.saturating_sub(m), (cy1 + m).min(h));
+            let cw = x1 - x0;
+            let mut crop: Vec<f32> = (y0..y1)
+                .flat_map(|y| plane[y * w + x0..y * w + x1].iter().copied())
+                .collect();
+            gaussian_blur(&mut crop, cw, y1 - y0, sigma);
+            let mut worst = 0f64;
+            let mut identical = true;
+            for y in cy0..cy1 {
+                for x in cx0..cx1 {
+                    let a = crop[(y - y0) * cw + x - x0];
+                    let b = full[y * w + x];
+                    identical &= a.to_bits() == b.to_bits();
+                    worst = worst.max(f64::from((a - b).abs()));
+                }
+            }
+            (worst, identical)
+        };
+        for sigma in [0.3f32, 1.0, 2.9, 3.0, 5.0, 8.0] {
+            let tol = 1e-7;
+            let m = reach_px(sigma, tol);
+            let (worst, identical) = crop_error(sigma, m);
+            assert!(
+                identical || sigma >= IIR_MIN_SIGMA_PX,
+                "σ {sigma}: not bit for bit"
+            );
+            assert!(worst <= tol * range, "σ {sigma}: {worst:e}");
+            // The reach is needed: with a quarter of it the recursive filter's error is
+            // beyond the tolerance (and the exact kernel's result is not the plane's).
+            let (short, same) = crop_error(sigma, m / 4);
+            assert!(!same, "σ {sigma}: a quarter of the reach changed nothing");
+            if sigma >= IIR_MIN_SIGMA_PX {
+                assert!(
+                    short > tol * range,
+                    "σ {sigma}: {short:e} at a quarter of the reach"
+                );
+            }
+        }
+        assert_eq!(reach_px(0.0, 1e-6), 0);
+        assert_eq!(reach_px(1.0, 1e-6), fir::radius(1.0));
+        assert_eq!(reach_px(5.0, 0.0), usize::MAX);
     }
 }

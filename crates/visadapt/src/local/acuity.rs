@@ -11,10 +11,13 @@
 //! Gaussians is not a Gaussian; its transfer function differs from `exp(−2π²σ²f²)` by at
 //! most 1.43 % of full contrast at any frequency for this ratio (worst case over `w` and
 //! `f`, computed in closed form; 3.2 % for a ratio of √2), about twice the recursive blur's
-//! own 0.65 % and inside the 2 % budget of the acuity stage. The cost is one blur of the
-//! planes per level, i.e. it grows with the log of the range of sigmas in the image, not
-//! with sigma. A pixel whose sigma is a level's exactly gets that level's Gaussian exactly;
-//! one below [`MIN_BLUR_SIGMA_PX`] is not blurred, as in the global operator.
+//! own 0.65 % and inside the 2 % budget of the acuity stage. Each level is blurred only
+//! over the parts of the image whose pixels take it (tiles of 64² pixels, with the blur's
+//! reach around them, [`crate::blur::reach_px`]), so where the sigmas vary smoothly the cost
+//! is about two blurs of each plane whatever the number of levels; the result is the
+//! whole-plane blur of every level's (bit for bit below [`crate::blur::IIR_MIN_SIGMA_PX`],
+//! within [`REGION_TOLERANCE`] above; tested). A pixel whose sigma is a level's exactly
+//! gets that level's Gaussian exactly; one below [`MIN_BLUR_SIGMA_PX`] is not blurred, as in the global operator.
 
 use crate::operator::MIN_BLUR_SIGMA_PX;
 
@@ -25,13 +28,13 @@ pub const SIGMA_RATIO: f64 = 1.259_921_049_894_873_2;
 /// smallest sigma at or above [`MIN_BLUR_SIGMA_PX`] to the first step at or above the
 /// largest. Empty when no pixel is blurred.
 pub fn levels(sigma_px: &[f32]) -> Vec<f32> {
-    let (mut lo, mut hi) = (f32::INFINITY, 0f32);
-    for &s in sigma_px {
-        if f64::from(s) >= MIN_BLUR_SIGMA_PX && s.is_finite() {
-            lo = lo.min(s);
-            hi = hi.max(s);
-        }
-    }
+    let r = SigmaRange::of(sigma_px);
+    levels_for(r.min, r.max)
+}
+
+/// The stack's levels from the smallest to the largest blurred, finite sigma (empty when
+/// there is none: `min` is `+∞`).
+fn levels_for(lo: f32, hi: f32) -> Vec<f32> {
     if !lo.is_finite() {
         return Vec::new();
     }
@@ -43,45 +46,86 @@ pub fn levels(sigma_px: &[f32]) -> Vec<f32> {
     out
 }
 
-/// Weight of level `j` of `levels` for a pixel of sigma `s` (the hat function in variance
-/// of the module docs); the unblurred image is "level −1" with sigma 0 and takes the pixels
-/// below [`MIN_BLUR_SIGMA_PX`].
-#[inline]
-fn weight(levels: &[f32], j: usize, s: f32) -> f32 {
-    // NaN and small sigmas: not blurred.
-    if f64::from(s).is_nan() || f64::from(s) < MIN_BLUR_SIGMA_PX {
-        return 0.0;
+/// The blurred sigmas of a set of pixels: the smallest and largest finite ones at or above
+/// [`MIN_BLUR_SIGMA_PX`] (`+∞` and `0` when none) and whether one is `+∞`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SigmaRange {
+    min: f32,
+    max: f32,
+    infinite: bool,
+}
+
+impl SigmaRange {
+    const EMPTY: SigmaRange = SigmaRange {
+        min: f32::INFINITY,
+        max: 0.0,
+        infinite: false,
+    };
+
+    fn of(sigma_px: &[f32]) -> Self {
+        sigma_px.iter().fold(Self::EMPTY, |r, &s| r.with(s))
     }
-    let v = s * s;
-    let here = levels[j] * levels[j];
-    if s == levels[j] {
-        return 1.0;
+
+    #[inline(always)]
+    fn with(self, s: f32) -> Self {
+        let blurred = f64::from(s) >= MIN_BLUR_SIGMA_PX;
+        let finite = blurred && s.is_finite();
+        SigmaRange {
+            min: if finite { self.min.min(s) } else { self.min },
+            max: if finite { self.max.max(s) } else { self.max },
+            infinite: self.infinite | (blurred & !s.is_finite()),
+        }
     }
-    if s < levels[j] {
-        if j == 0 {
-            return 0.0;
+
+    fn join(self, o: Self) -> Self {
+        SigmaRange {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+            infinite: self.infinite | o.infinite,
         }
-        let below = levels[j - 1] * levels[j - 1];
-        if s <= levels[j - 1] {
-            return 0.0;
+    }
+
+    /// The first and last level of `levels` with weight for some pixel of the range
+    /// (`None`: no pixel is blurred): the last level at or below a sigma and the next one.
+    fn levels(self, levels: &[f32]) -> Option<(usize, usize)> {
+        let last = levels.len() - 1;
+        let below = |s: f32| levels.partition_point(|&l| l <= s).saturating_sub(1);
+        match (self.min.is_finite(), self.infinite) {
+            (false, false) => None,
+            (false, true) => Some((last, last)),
+            (true, inf) => Some((
+                below(self.min),
+                if inf {
+                    last
+                } else {
+                    (below(self.max) + 1).min(last)
+                },
+            )),
         }
-        (v - below) / (here - below)
-    } else {
-        if j + 1 >= levels.len() {
-            // Above the largest level (cannot happen with `levels`' range): take it.
-            return 1.0;
-        }
-        let above = levels[j + 1] * levels[j + 1];
-        if s >= levels[j + 1] {
-            return 0.0;
-        }
-        1.0 - (v - here) / (above - here)
     }
 }
+
+/// Side of the square tiles, pixels, by which the levels each part of the image needs are
+/// found (see [`varying_gaussian_blur`]).
+const TILE_PX: usize = 64;
+
+/// The largest difference, in the planes' own units, that restricting a level's blur to
+/// the parts of the image that use it makes (display-relative units in the operator:
+/// 1/4000 of an 8-bit display code). Levels under [`crate::blur::IIR_MIN_SIGMA_PX`] are
+/// exact (see [`crate::blur::reach_px`]).
+pub const REGION_TOLERANCE: f64 = 1e-6;
 
 /// Blur `planes` (each `width × height`, row-major) in place, pixel `i` with a Gaussian of
 /// standard deviation `sigma_px[i]` pixels (see the module docs). A pixel whose sigma is
 /// below [`MIN_BLUR_SIGMA_PX`], NaN or negative keeps its value.
+///
+/// Each level is blurred only where pixels use it: the image is cut into tiles of 64²
+/// pixels, each tile needs the levels around the sigmas in it, and a level is blurred
+/// over rectangles covering its tiles and the blur's reach around them
+/// ([`crate::blur::reach_px`]). So the cost is about two blurs of each plane wherever the
+/// sigmas vary smoothly, not one per level; the result is the whole-plane blur of every
+/// level's, bit for bit below [`crate::blur::IIR_MIN_SIGMA_PX`] and within
+/// [`REGION_TOLERANCE`] above (tested).
 ///
 /// # Panics
 /// If a plane or `sigma_px` does not hold `width × height` values.
@@ -96,13 +140,16 @@ pub fn varying_gaussian_blur(
     for p in planes.iter() {
         assert_eq!(p.len(), n, "plane of width × height samples");
     }
-    let levels = levels(sigma_px);
+    let mut tiles = Tiles::new(sigma_px, width, height);
+    let levels = tiles.stack();
     if levels.is_empty() {
         return;
     }
-    // One plane at a time: its unblurred copy and one blurred level beside it (8 bytes per
-    // pixel, instead of 8 per pixel and plane).
+    // One plane at a time: its unblurred copy and one blurred rectangle beside it (at most
+    // 8 bytes per pixel).
+    let mut scratch = Vec::new();
     for p in planes.iter_mut() {
+        let range = value_range(p);
         let source = p.to_vec();
         // The unblurred part: pixels not blurred keep their values, the others start at 0.
         for (v, &s) in p.iter_mut().zip(sigma_px) {
@@ -110,51 +157,393 @@ pub fn varying_gaussian_blur(
                 *v = 0.0;
             }
         }
-        let mut scratch = source.clone();
         for (j, &sigma) in levels.iter().enumerate() {
-            if j > 0 {
-                scratch.copy_from_slice(&source);
+            let reach = crate::blur::reach_px(sigma, REGION_TOLERANCE / range);
+            for region in tiles.regions(j, reach) {
+                let [x0, x1, y0, y1] = region.crop;
+                let cw = x1 - x0;
+                scratch.clear();
+                // Exactly the rectangle (no growth beyond it: at most one plane).
+                scratch.reserve_exact(cw * (y1 - y0));
+                for y in y0..y1 {
+                    scratch.extend_from_slice(&source[y * width + x0..y * width + x1]);
+                }
+                crate::blur::gaussian_blur_planes(
+                    &mut [scratch.as_mut_slice()],
+                    cw,
+                    y1 - y0,
+                    sigma,
+                );
+                // Row by row (in parallel), each piece crossing the row.
+                let row = |y: usize, out: &mut [f32]| {
+                    for &[px0, px1, py0, py1] in &region.pieces {
+                        if (py0..py1).contains(&y) {
+                            let blurred = &scratch[(y - y0) * cw + px0 - x0..][..px1 - px0];
+                            let sig = &sigma_px[y * width + px0..y * width + px1];
+                            accumulate(&mut out[px0..px1], blurred, &levels, j, sig);
+                        }
+                    }
+                };
+                let (ry0, ry1) = region
+                    .pieces
+                    .iter()
+                    .fold((height, 0), |(a, b), r| (a.min(r[2]), b.max(r[3])));
+                let rows = &mut p[ry0 * width..ry1 * width];
+                #[cfg(feature = "rayon")]
+                {
+                    use rayon::prelude::*;
+                    rows.par_chunks_mut(width)
+                        .enumerate()
+                        .for_each(|(k, out)| row(ry0 + k, out));
+                }
+                #[cfg(not(feature = "rayon"))]
+                for (k, out) in rows.chunks_mut(width).enumerate() {
+                    row(ry0 + k, out);
+                }
             }
-            crate::blur::gaussian_blur_planes(&mut [scratch.as_mut_slice()], width, height, sigma);
-            accumulate(p, &scratch, &levels, j, sigma_px);
         }
     }
 }
 
-/// `out += w_j(σ)·level` per pixel.
-fn accumulate(out: &mut [f32], level: &[f32], levels: &[f32], j: usize, sigma_px: &[f32]) {
-    let f = |out: &mut [f32], level: &[f32], sigma: &[f32]| {
-        for ((o, &l), &s) in out.iter_mut().zip(level).zip(sigma) {
-            let w = weight(levels, j, s);
-            if w != 0.0 {
-                *o += w * l;
+/// Largest minus smallest value of a plane (`+∞` when it holds a non-finite value).
+fn value_range(plane: &[f32]) -> f64 {
+    let (lo, hi) = plane
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    if plane.iter().all(|v| v.is_finite()) {
+        f64::from(hi) - f64::from(lo)
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// A rectangle `[x0, x1, y0, y1]` (half-open), pixels.
+type Rect = [usize; 4];
+
+/// One blur of a level: the rectangle blurred (`crop`) and the parts of it whose pixels
+/// take the level (`pieces`, each at least the level's reach inside `crop` or at the
+/// image's edge).
+struct Region {
+    crop: Rect,
+    pieces: Vec<Rect>,
+}
+
+/// Per tile, the range of levels its pixels take.
+struct Tiles {
+    width: usize,
+    height: usize,
+    /// Tiles per row.
+    across: usize,
+    /// Tiles per column.
+    down: usize,
+    /// Per tile, the range of its blurred sigmas.
+    sigmas: Vec<SigmaRange>,
+    /// Per tile, the first and last level with weight for some pixel in it (`None`: no
+    /// pixel is blurred).
+    levels: Vec<Option<(usize, usize)>>,
+}
+
+impl Tiles {
+    /// The sigma range of every tile, in one pass over the sigmas.
+    fn new(sigma_px: &[f32], width: usize, height: usize) -> Self {
+        let (across, down) = (width.div_ceil(TILE_PX), height.div_ceil(TILE_PX));
+        let band = |ty: usize| -> Vec<SigmaRange> {
+            let mut out = vec![SigmaRange::EMPTY; across];
+            for y in ty * TILE_PX..((ty + 1) * TILE_PX).min(height) {
+                let row = &sigma_px[y * width..(y + 1) * width];
+                for (tile, seg) in out.iter_mut().zip(row.chunks(TILE_PX)) {
+                    *tile = tile.join(SigmaRange::of(seg));
+                }
+            }
+            out
+        };
+        #[cfg(feature = "rayon")]
+        let bands: Vec<_> = {
+            use rayon::prelude::*;
+            (0..down).into_par_iter().map(band).collect()
+        };
+        #[cfg(not(feature = "rayon"))]
+        let bands: Vec<_> = (0..down).map(band).collect();
+        Tiles {
+            width,
+            height,
+            across,
+            down,
+            sigmas: bands.concat(),
+            levels: Vec::new(),
+        }
+    }
+
+    /// The stack's levels for all tiles, and each tile's range of them.
+    fn stack(&mut self) -> Vec<f32> {
+        let all = self
+            .sigmas
+            .iter()
+            .fold(SigmaRange::EMPTY, |a, &t| a.join(t));
+        let levels = levels_for(all.min, all.max);
+        if !levels.is_empty() {
+            self.levels = self.sigmas.iter().map(|t| t.levels(&levels)).collect();
+        }
+        levels
+    }
+
+    /// The rectangles over which level `j` is blurred, for a blur reaching `reach` pixels:
+    /// per band of tiles the runs of tiles that take the level (joined when their reaches
+    /// overlap), gathered into one rectangle while that costs no more area than blurring
+    /// them apart.
+    fn regions(&self, j: usize, reach: usize) -> Vec<Region> {
+        let (w, h) = (self.width, self.height);
+        let grow = |[x0, x1, y0, y1]: Rect| -> Rect {
+            [
+                x0.saturating_sub(reach),
+                x1.saturating_add(reach).min(w),
+                y0.saturating_sub(reach),
+                y1.saturating_add(reach).min(h),
+            ]
+        };
+        let area = |[x0, x1, y0, y1]: Rect| (x1 - x0) * (y1 - y0);
+        let union = |a: Rect, b: Rect| {
+            [
+                a[0].min(b[0]),
+                a[1].max(b[1]),
+                a[2].min(b[2]),
+                a[3].max(b[3]),
+            ]
+        };
+        let mut regions: Vec<Region> = Vec::new();
+        for ty in 0..self.down {
+            let (y0, y1) = (ty * TILE_PX, ((ty + 1) * TILE_PX).min(h));
+            let mut runs: Vec<Rect> = Vec::new();
+            for tx in 0..self.across {
+                let takes =
+                    self.levels[ty * self.across + tx].is_some_and(|(a, b)| a <= j && j <= b);
+                if !takes {
+                    continue;
+                }
+                let (x0, x1) = (tx * TILE_PX, ((tx + 1) * TILE_PX).min(w));
+                match runs.last_mut() {
+                    Some(last) if x0 <= last[1].saturating_add(reach.saturating_mul(2)) => {
+                        last[1] = x1;
+                    }
+                    _ => runs.push([x0, x1, y0, y1]),
+                }
+            }
+            for piece in runs {
+                let crop = grow(piece);
+                let joined = regions
+                    .iter_mut()
+                    .rev()
+                    .take(4)
+                    .find(|r| area(union(r.crop, crop)) <= area(r.crop) + area(crop));
+                match joined {
+                    Some(r) => {
+                        r.crop = union(r.crop, crop);
+                        r.pieces.push(piece);
+                    }
+                    None => regions.push(Region {
+                        crop,
+                        pieces: vec![piece],
+                    }),
+                }
             }
         }
-    };
-    const CHUNK: usize = 1 << 15;
-    #[cfg(feature = "rayon")]
-    {
-        use rayon::prelude::*;
-        out.par_chunks_mut(CHUNK)
-            .zip(level.par_chunks(CHUNK))
-            .zip(sigma_px.par_chunks(CHUNK))
-            .for_each(|((o, l), s)| f(o, l, s));
+        regions
     }
-    #[cfg(not(feature = "rayon"))]
-    {
-        for ((o, l), s) in out
-            .chunks_mut(CHUNK)
-            .zip(level.chunks(CHUNK))
-            .zip(sigma_px.chunks(CHUNK))
-        {
-            f(o, l, s);
-        }
+}
+
+/// `out += w_j(σ)·level` per pixel (where the weight is not 0), with the weights of
+/// [`weight`] in a branch-free form the compiler vectorises (the same operations, so the
+/// same values; tested).
+fn accumulate(out: &mut [f32], level: &[f32], levels: &[f32], j: usize, sigma_px: &[f32]) {
+    let here = levels[j];
+    let h2 = here * here;
+    // The rising side from the level below (none for the first level), the falling side to
+    // the level above (for the last level, every sigma above it takes it whole).
+    let below = if j > 0 { levels[j - 1] } else { here };
+    let b2 = below * below;
+    let last = j + 1 >= levels.len();
+    let above = if last { here } else { levels[j + 1] };
+    let a2 = above * above;
+    for ((o, &l), &s) in out.iter_mut().zip(level).zip(sigma_px) {
+        let v = s * s;
+        let rising = (v - b2) / (h2 - b2);
+        let falling = if last {
+            1.0
+        } else {
+            1.0 - (v - h2) / (a2 - h2)
+        };
+        let w = if s == here {
+            1.0
+        } else if s > below && s < here {
+            rising
+        } else if s > here && (last || s < above) {
+            falling
+        } else {
+            // Including NaN and every sigma below the first level (so below the
+            // operator's minimum): not blurred.
+            0.0
+        };
+        *o = if w != 0.0 { *o + w * l } else { *o };
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The reference weight of level `j` of `levels` for a pixel of sigma `s` (the hat function in variance
+    /// of the module docs); the unblurred image is "level −1" with sigma 0 and takes the pixels
+    /// below [`MIN_BLUR_SIGMA_PX`].
+    fn weight(levels: &[f32], j: usize, s: f32) -> f32 {
+        // NaN and small sigmas: not blurred.
+        if f64::from(s).is_nan() || f64::from(s) < MIN_BLUR_SIGMA_PX {
+            return 0.0;
+        }
+        let v = s * s;
+        let here = levels[j] * levels[j];
+        if s == levels[j] {
+            return 1.0;
+        }
+        if s < levels[j] {
+            if j == 0 {
+                return 0.0;
+            }
+            let below = levels[j - 1] * levels[j - 1];
+            if s <= levels[j - 1] {
+                return 0.0;
+            }
+            (v - below) / (here - below)
+        } else {
+            if j + 1 >= levels.len() {
+                // Above the largest level (cannot happen with `levels`' range): take it.
+                return 1.0;
+            }
+            let above = levels[j + 1] * levels[j + 1];
+            if s >= levels[j + 1] {
+                return 0.0;
+            }
+            1.0 - (v - here) / (above - here)
+        }
+    }
+
+    /// The stack as it was first written, the reference the restricted one is pinned to:
+    /// every level blurred over the whole plane and added with [`weight`].
+    fn reference_blur(plane: &mut [f32], width: usize, height: usize, sigma_px: &[f32]) {
+        let levels = levels(sigma_px);
+        if levels.is_empty() {
+            return;
+        }
+        let source = plane.to_vec();
+        for (v, &s) in plane.iter_mut().zip(sigma_px) {
+            if f64::from(s) >= MIN_BLUR_SIGMA_PX {
+                *v = 0.0;
+            }
+        }
+        for (j, &sigma) in levels.iter().enumerate() {
+            let mut level = source.clone();
+            crate::blur::gaussian_blur(&mut level, width, height, sigma);
+            for ((o, &l), &s) in plane.iter_mut().zip(&level).zip(sigma_px) {
+                let w = weight(&levels, j, s);
+                if w != 0.0 {
+                    *o += w * l;
+                }
+            }
+        }
+    }
+
+    /// A test scene: noise over a bright block (a range of `peak`), and a sigma field that
+    /// grows across the image and jumps at an edge, with unblurred and NaN pixels.
+    fn scene(w: usize, h: usize, peak: f32, sigma_lo: f32, sigma_hi: f32) -> (Vec<f32>, Vec<f32>) {
+        let mut seed = 99u32;
+        let mut plane = Vec::with_capacity(w * h);
+        let mut sigma = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let noise = (seed >> 8) as f32 / (1u32 << 24) as f32;
+                let block = (x / 50 + y / 40) % 3 == 0;
+                plane.push(if block { peak * noise } else { noise });
+                let u = x as f32 / w as f32;
+                let mut s = sigma_lo * (sigma_hi / sigma_lo).powf(u);
+                if y > h / 2 && x > w / 3 {
+                    s *= 0.5;
+                }
+                if (x + 3 * y) % 97 == 0 {
+                    s = 0.01;
+                }
+                if (x * 7 + y) % 389 == 0 {
+                    s = f32::NAN;
+                }
+                sigma.push(s);
+            }
+        }
+        (plane, sigma)
+    }
+
+    /// The restricted stack against the reference: bit for bit when every level uses the
+    /// exact kernel, within [`REGION_TOLERANCE`] (plus f32 rounding of the sums) when the
+    /// recursive one is used, for an HDR range of 1e4.
+    #[test]
+    fn restricted_stack_matches_the_whole_plane_stack() {
+        let (w, h) = (420, 300);
+        for (lo, hi, exact) in [
+            (0.3f32, 2.3f32, true),
+            (0.6, 6.0, false),
+            (2.0, 20.0, false),
+        ] {
+            let (plane, sigma) = scene(w, h, 1e4, lo, hi);
+            let top = *levels(&sigma).last().expect("levels");
+            assert_eq!(
+                top < crate::blur::IIR_MIN_SIGMA_PX,
+                exact,
+                "σ {lo}..{hi}: top level {top}"
+            );
+            let mut want = plane.clone();
+            reference_blur(&mut want, w, h, &sigma);
+            let mut got = plane.clone();
+            varying_gaussian_blur(&mut [got.as_mut_slice()], w, h, &sigma);
+            let mut worst = 0f64;
+            for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+                if exact {
+                    assert_eq!(a.to_bits(), b.to_bits(), "σ {lo}..{hi}: pixel {i}: {a} {b}");
+                }
+                // f32 rounding of the level sums (values up to 1e4) beside the tolerance.
+                let rounding = 4.0 * f64::from(f32::EPSILON) * f64::from(b.abs());
+                worst = worst.max(f64::from((a - b).abs()) - rounding);
+            }
+            assert!(worst <= REGION_TOLERANCE, "σ {lo}..{hi}: {worst:e}");
+        }
+    }
+
+    /// The regions are what makes it cheap: with a sigma field spanning ten levels, each
+    /// level is blurred over a small part of the image (the sum over levels, with the
+    /// reaches, under four images, against one image per level for the whole-plane stack).
+    #[test]
+    fn regions_cover_about_two_images_in_total() {
+        let (w, h) = (1280, 320);
+        let (_, sigma) = scene(w, h, 1.0, 0.6, 6.0);
+        let mut tiles = Tiles::new(&sigma, w, h);
+        let lv = tiles.stack();
+        assert!(lv.len() >= 10, "{}", lv.len());
+        let total: usize = (0..lv.len())
+            .map(|j| {
+                let reach = crate::blur::reach_px(lv[j], REGION_TOLERANCE);
+                tiles
+                    .regions(j, reach)
+                    .iter()
+                    .map(|r| (r.crop[1] - r.crop[0]) * (r.crop[3] - r.crop[2]))
+                    .sum::<usize>()
+            })
+            .sum();
+        let images = total as f64 / (w * h) as f64;
+        assert!(
+            images < 4.0,
+            "{images} images blurred over {} levels",
+            lv.len()
+        );
+    }
 
     /// Worst transfer-function error of a two-level mixture for the stack's ratio, in
     /// closed form over the mixing weight and frequency (the module docs' 1.43 %).
