@@ -107,7 +107,12 @@ class HdrImage:
 def read(
     path: Path, max_pixels: Optional[int] = None, max_memory_bytes: Optional[int] = None
 ) -> HdrImage:
-    """Read a Radiance, OpenEXR or PFM file (format from its first bytes).
+    """Read a Radiance, OpenEXR or PFM file, or an 8/16-bit PNG, JPEG or TIFF photograph
+    (format from its first bytes).
+
+    A photograph is read with the sRGB curve undone, Rec. 709 primaries, a D65 white and
+    code-value white at Y = 1 (relative units): state its luminance in cd/m² with
+    `map(image, scale=...)` or `peak=`.
 
     Raises OSError (unreadable), DecodeError (corrupt), UnsupportedError (unknown format or
     feature), ValueError (larger than max_pixels, default 2**28, or than the memory budget

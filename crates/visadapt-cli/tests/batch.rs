@@ -7,32 +7,20 @@ use common::*;
 use std::path::{Path, PathBuf};
 use visadapt::HdrImage;
 
-/// A grey field at `l` cd/m² (equal-energy, with its scotopic channel), with a view.
+/// The common grey field (equal-energy, with its scotopic channel), with a view.
 fn grey(w: usize, h: usize, l: f32) -> HdrImage {
-    let mut im = HdrImage::zeros(w, h);
-    im.x.fill(l);
-    im.y.fill(l);
-    im.z.fill(l);
-    im.scotopic = Some(vec![2.261 * l; w * h]);
-    im.absolute_units = true;
+    let mut im = common::grey(w, h, l);
     im.view = Some(visadapt::View::perspective(40.0, w, h));
     im
-}
-
-fn write(dir: &Path, name: &str, image: &HdrImage) -> PathBuf {
-    let path = dir.join(name);
-    let file = std::fs::File::create(&path).unwrap();
-    visadapt::io::exr::write_hdr(image, std::io::BufWriter::new(file)).unwrap();
-    path
 }
 
 #[test]
 fn a_batch_writes_every_good_input_into_the_folder_and_fails_for_the_bad_one() {
     let dir = tempfile::tempdir().unwrap();
-    let a = write(dir.path(), "a.exr", &grey(16, 8, 100.0));
+    let a = write_exr(dir.path().join("a.exr"), &grey(16, 8, 100.0));
     let bad = dir.path().join("b.exr");
     std::fs::write(&bad, b"v/1\x01 truncated").unwrap();
-    let c = write(dir.path(), "c.exr", &grey(8, 8, 0.01));
+    let c = write_exr(dir.path().join("c.exr"), &grey(8, 8, 0.01));
     let out_dir = dir.path().join("out");
     let out = visadapt()
         .args(["map"])
@@ -81,22 +69,17 @@ fn a_batch_gives_the_same_report_and_pixels_as_single_runs_in_parallel_too() {
             for (i, y) in im.y.iter_mut().enumerate() {
                 *y *= 1.0 + (i % 7) as f32;
             }
-            write(dir.path(), &format!("{name}.exr"), &im)
+            write_exr(dir.path().join(format!("{name}.exr")), &im)
         })
         .collect();
     for jobs in ["1", "2", "3"] {
         let out_dir = dir.path().join(format!("out{jobs}"));
-        let out = visadapt()
-            .arg("map")
-            .args(&inputs)
-            .args(["--json", "--jobs", jobs, "--format", "exr", "-o"])
-            .arg(&out_dir)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = succeed(
+            visadapt()
+                .arg("map")
+                .args(&inputs)
+                .args(["--json", "--jobs", jobs, "--format", "exr", "-o"])
+                .arg(&out_dir),
         );
         let stdout = String::from_utf8(out.stdout).unwrap();
         let lines: Vec<serde_json::Value> = stdout
@@ -136,8 +119,8 @@ fn a_batch_refuses_two_inputs_for_one_output_and_a_contradicting_format_before_a
     let dir = tempfile::tempdir().unwrap();
     let sub = dir.path().join("sub");
     std::fs::create_dir(&sub).unwrap();
-    let a = write(dir.path(), "a.exr", &grey(4, 4, 10.0));
-    let a2 = write(&sub, "a.exr", &grey(4, 4, 10.0));
+    let a = write_exr(dir.path().join("a.exr"), &grey(4, 4, 10.0));
+    let a2 = write_exr(sub.join("a.exr"), &grey(4, 4, 10.0));
     let out_dir = dir.path().join("out");
     let out = visadapt()
         .arg("map")
@@ -189,20 +172,15 @@ fn a_batch_refuses_two_inputs_for_one_output_and_a_contradicting_format_before_a
 #[test]
 fn one_input_into_a_folder_takes_its_name_and_keeps_the_full_report() {
     let dir = tempfile::tempdir().unwrap();
-    let a = write(dir.path(), "scene.exr", &grey(4, 4, 10.0));
+    let a = write_exr(dir.path().join("scene.exr"), &grey(4, 4, 10.0));
     let out_dir = dir.path().join("out");
     std::fs::create_dir(&out_dir).unwrap();
-    let out = visadapt()
-        .arg("map")
-        .arg(&a)
-        .args(["--format", "jpg", "-o"])
-        .arg(&out_dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("map")
+            .arg(&a)
+            .args(["--format", "jpg", "-o"])
+            .arg(&out_dir),
     );
     assert_eq!(files_in(&out_dir), ["scene.jpg"]);
     let stdout = String::from_utf8(out.stdout).unwrap();
@@ -211,10 +189,8 @@ fn one_input_into_a_folder_takes_its_name_and_keeps_the_full_report() {
 
 /// Width and height of a PNG.
 fn image_size(path: &Path) -> (u32, u32) {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let reader = decoder.read_info().unwrap();
-    let info = reader.info();
-    (info.width, info.height)
+    let p = read_png(path);
+    (p.width, p.height)
 }
 
 #[test]
@@ -224,7 +200,7 @@ fn a_pipe_reads_standard_input_and_writes_standard_output_with_the_report_on_std
     for (i, y) in scene.y.iter_mut().enumerate() {
         *y *= 1.0 + (i % 5) as f32;
     }
-    let input = write(dir.path(), "scene.exr", &scene);
+    let input = write_exr(dir.path().join("scene.exr"), &scene);
     let bytes = std::fs::read(&input).unwrap();
     for (format, file) in [(None, "by-file.png"), (Some("exr"), "by-file.exr")] {
         let by_file = dir.path().join(file);
@@ -265,18 +241,13 @@ fn a_pipe_reads_standard_input_and_writes_standard_output_with_the_report_on_std
     assert_eq!(report["width"], 12);
     // A batch can read standard input once, named "stdin" in the folder.
     let out_dir = dir.path().join("out");
-    let out = visadapt()
-        .args(["map", "-"])
-        .arg(&input)
-        .arg("-o")
-        .arg(&out_dir)
-        .write_stdin(bytes)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeed(
+        visadapt()
+            .args(["map", "-"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&out_dir)
+            .write_stdin(bytes),
     );
     assert_eq!(files_in(&out_dir), ["scene.png", "stdin.png"]);
 }
@@ -320,22 +291,17 @@ fn float_tiff_and_radiance_outputs_hold_the_display_image_of_the_exr_output() {
     for (i, y) in scene.y.iter_mut().enumerate() {
         *y *= 0.2 + (i % 9) as f32;
     }
-    let input = write(dir.path(), "scene.exr", &scene);
+    let input = write_exr(dir.path().join("scene.exr"), &scene);
     let run = |name: &str, extra: &[&str]| {
         let path = dir.path().join(name);
-        let out = visadapt()
-            .arg("map")
-            .arg(&input)
-            .args(["--display-max", "120"])
-            .args(extra)
-            .arg("-o")
-            .arg(&path)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        succeed(
+            visadapt()
+                .arg("map")
+                .arg(&input)
+                .args(["--display-max", "120"])
+                .args(extra)
+                .arg("-o")
+                .arg(&path),
         );
         path
     };
@@ -394,7 +360,7 @@ fn float_tiff_and_radiance_outputs_hold_the_display_image_of_the_exr_output() {
         }
     }
     // A narrow image: flat RGBE pixels instead of run-length scanlines.
-    let narrow = write(dir.path(), "narrow.exr", &grey(3, 5, 0.5));
+    let narrow = write_exr(dir.path().join("narrow.exr"), &grey(3, 5, 0.5));
     for ext in ["exr", "hdr"] {
         let out = visadapt()
             .arg("map")

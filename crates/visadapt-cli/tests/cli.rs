@@ -54,18 +54,13 @@ fn observer_rejects_impossible_luminances() {
 fn map_writes_png_and_reports() {
     let dir = tempfile::tempdir().unwrap();
     let png = dir.path().join("out.png");
-    let out = visadapt()
-        .arg("map")
-        .arg(data("mixtex.hdr"))
-        .arg("-o")
-        .arg(&png)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("map")
+            .arg(data("mixtex.hdr"))
+            .arg("-o")
+            .arg(&png)
+            .arg("--json"),
     );
     let v = json(&out.stdout);
     let lwa = v["adaptation_cd_m2"].as_f64().unwrap();
@@ -138,19 +133,14 @@ fn map_text_report_names_what_it_used() {
 fn map_reports_the_white_point_used() {
     let dir = tempfile::tempdir().unwrap();
     let run = |extra: &[&str]| {
-        let out = visadapt()
-            .arg("map")
-            .arg(data("mixtex.hdr"))
-            .arg("-o")
-            .arg(dir.path().join("o.png"))
-            .arg("--json")
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = succeed(
+            visadapt()
+                .arg("map")
+                .arg(data("mixtex.hdr"))
+                .arg("-o")
+                .arg(dir.path().join("o.png"))
+                .arg("--json")
+                .args(extra),
         );
         json(&out.stdout)
     };

@@ -7,21 +7,11 @@ use common::*;
 use predicates::prelude::*;
 use std::path::Path;
 
-/// Decode a PNG: (width, height, interleaved 8-bit RGB).
-fn read_png(path: &Path) -> (u32, u32, Vec<u8>) {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    assert_eq!(info.color_type, png::ColorType::Rgb);
-    buf.truncate(info.buffer_size());
-    (info.width, info.height, buf)
-}
-
-fn one_line(stderr: &[u8]) -> String {
-    let s = String::from_utf8_lossy(stderr).into_owned();
-    assert_eq!(s.trim_end().lines().count(), 1, "not one line: {s}");
-    s
+/// Decode an 8-bit RGB PNG: (width, height, interleaved samples).
+fn rgb_png(path: &Path) -> (u32, u32, Vec<u8>) {
+    let p = read_png(path);
+    assert_eq!(p.color_type, png::ColorType::Rgb);
+    (p.width, p.height, p.samples)
 }
 
 #[test]
@@ -63,7 +53,7 @@ fn demo_writes_four_panels_a_contact_sheet_and_a_table() {
     }
     // The panels get darker with the level; the starlight panel is not black.
     let mean = |name: &str| {
-        let (_, _, rgb) = read_png(&out.join(name));
+        let (_, _, rgb) = rgb_png(&out.join(name));
         rgb.iter().map(|&v| v as f64).sum::<f64>() / rgb.len() as f64
     };
     let m: Vec<f64> = [
@@ -79,8 +69,8 @@ fn demo_writes_four_panels_a_contact_sheet_and_a_table() {
     assert!(m[3] > 10.0, "{m:?}");
     // Light adaptation (Fig. 12a): the frame just after the switch to 5623 cd/m² is washed
     // out (brighter, less contrast) compared with the last frame, 75 s later.
-    let (_, _, first) = read_png(&out.join("fig12a-1.png"));
-    let (_, _, last) = read_png(&out.join("fig12a-6.png"));
+    let (_, _, first) = rgb_png(&out.join("fig12a-1.png"));
+    let (_, _, last) = rgb_png(&out.join("fig12a-6.png"));
     let spread = |rgb: &[u8]| {
         let (lo, hi) = rgb
             .iter()
@@ -98,8 +88,8 @@ fn demo_writes_four_panels_a_contact_sheet_and_a_table() {
         "{stdout}"
     );
     // The contact sheet holds the four panels (2 x 2) and their labels.
-    let (pw, ph, _) = read_png(&out.join("panel-1000.png"));
-    let (w, h, sheet) = read_png(&out.join("contact-sheet.png"));
+    let (pw, ph, _) = rgb_png(&out.join("panel-1000.png"));
+    let (w, h, sheet) = rgb_png(&out.join("contact-sheet.png"));
     assert!(w > 2 * pw && h > 2 * ph, "{w}x{h} for panels {pw}x{ph}");
     // Labels are light text on the dark background above each panel.
     let light = sheet[..(w as usize * 60 * 3)]
@@ -147,7 +137,7 @@ fn demo_into_an_unwritable_directory_fails_cleanly() {
         .arg(file.join("sub"))
         .assert()
         .failure();
-    let e = one_line(&run.get_output().stderr);
+    let e = one_line_error(&run.get_output().stderr);
     assert!(e.contains("cannot create the output directory"), "{e}");
     assert_eq!(files_in(dir.path()), ["a-file"]);
 }
@@ -224,13 +214,13 @@ fn chart_refuses_bad_input_without_writing() {
         .arg(dir.path().join("c.png"))
         .assert()
         .failure();
-    assert!(one_line(&run.get_output().stderr).contains(".exr"));
+    assert!(one_line_error(&run.get_output().stderr).contains(".exr"));
     let run = visadapt()
         .args(["chart", "--white", "1", "-o"])
         .arg(dir.path().join("missing/c.exr"))
         .assert()
         .failure();
-    one_line(&run.get_output().stderr);
+    one_line_error(&run.get_output().stderr);
     assert!(files_in(dir.path()).is_empty());
 }
 
@@ -265,7 +255,7 @@ fn plots_are_written_as_svg_and_png() {
             .arg(&png)
             .assert()
             .success();
-        let (w, h, rgb) = read_png(&png);
+        let (w, h, rgb) = rgb_png(&png);
         assert!(w >= 900 && h >= 500);
         // Mostly white background, with dark text and coloured curves.
         let dark = rgb.chunks(3).filter(|p| p.iter().all(|&v| v < 80)).count();
@@ -309,12 +299,12 @@ fn plot_refuses_unknown_names_and_formats_without_writing() {
         .arg(dir.path().join("x.pdf"))
         .assert()
         .failure();
-    assert!(one_line(&run.get_output().stderr).contains(".svg or .png"));
+    assert!(one_line_error(&run.get_output().stderr).contains(".svg or .png"));
     let run = visadapt()
         .args(["plot", "tvi", "-o"])
         .arg(dir.path().join("no/such/dir/x.svg"))
         .assert()
         .failure();
-    one_line(&run.get_output().stderr);
+    one_line_error(&run.get_output().stderr);
     assert!(files_in(dir.path()).is_empty());
 }

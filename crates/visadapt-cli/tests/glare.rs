@@ -28,18 +28,13 @@ fn map_glare_reports_the_veil_and_the_raised_adaptation() {
     let input = dir.path().join("night.pfm");
     night_pfm(&input);
     let run = |extra: &[&str]| {
-        let out = visadapt()
-            .arg("map")
-            .arg(&input)
-            .args(["--scale", "1", "--fov", "40", "--json", "-o"])
-            .arg(dir.path().join("out.png"))
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = succeed(
+            visadapt()
+                .arg("map")
+                .arg(&input)
+                .args(["--scale", "1", "--fov", "40", "--json", "-o"])
+                .arg(dir.path().join("out.png"))
+                .args(extra),
         );
         json(&out.stdout)
     };

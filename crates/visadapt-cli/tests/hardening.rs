@@ -153,16 +153,14 @@ fn streams_are_refused_after_their_first_bytes() {
     let mut f = radiance(4, 4);
     f.resize(f.len() + (64 << 20), 0);
     std::fs::write(d.join("padded.hdr"), &f).unwrap();
-    let out = visadapt()
-        .current_dir(d)
-        .args(["map", "padded.hdr", "-o", "p.png", "--max-memory", "4M"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeed(visadapt().current_dir(d).args([
+        "map",
+        "padded.hdr",
+        "-o",
+        "p.png",
+        "--max-memory",
+        "4M",
+    ]));
 }
 
 #[test]
@@ -281,24 +279,15 @@ fn one_huge_finite_pixel_does_not_blacken_the_image() {
         f.extend(v.to_le_bytes());
     }
     std::fs::write(d.join("hot.pfm"), &f).unwrap();
-    let out = visadapt()
-        .current_dir(d)
-        .args([
-            "map",
-            "hot.pfm",
-            "-o",
-            "hot.png",
-            "--json",
-            "--world-adaptation",
-            "0.01",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = succeed(visadapt().current_dir(d).args([
+        "map",
+        "hot.pfm",
+        "-o",
+        "hot.png",
+        "--json",
+        "--world-adaptation",
+        "0.01",
+    ]));
     let v = json(&out.stdout);
     assert!(v["pixels_clipped"].as_u64().unwrap() >= 1, "{v}");
     let dec = png::Decoder::new(std::io::BufReader::new(

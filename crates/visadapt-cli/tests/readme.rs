@@ -47,12 +47,7 @@ fn readme_commands() -> Vec<String> {
 fn stand_ins(dir: &Path) {
     let limits = visadapt::Limits::default();
     let scene = visadapt::io::read(&data("mixtex.hdr"), &limits).unwrap();
-    let exr = |name: &str, image: &visadapt::HdrImage| {
-        let path = dir.join(name);
-        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-        let file = std::fs::File::create(&path).unwrap();
-        visadapt::io::exr::write_hdr(image, std::io::BufWriter::new(file)).unwrap();
-    };
+    let exr = |name: &str, image: &visadapt::HdrImage| write_exr(dir.join(name), image);
     for name in ["scene.hdr", "a.hdr", "b.hdr"] {
         std::fs::copy(data("mixtex.hdr"), dir.join(name)).unwrap();
     }

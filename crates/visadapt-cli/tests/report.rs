@@ -269,22 +269,21 @@ fn map_says_how_many_pixels_clip_why_and_what_to_do() {
         (im.x[k], im.y[k], im.z[k]) = (l, l, l); // grey of the file's equal-energy white
     }
     im.absolute_units = true;
-    visadapt::io::exr::write_hdr(&im, &mut std::fs::File::create(&input).unwrap()).unwrap();
+    write_exr(&input, &im);
     let out = dir.path().join("out.png");
     let run = |extra: &[&str]| {
-        let o = visadapt()
-            .args([
-                "map",
-                input.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-                "--fov",
-                "40",
-            ])
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let o = succeed(
+            visadapt()
+                .args([
+                    "map",
+                    input.to_str().unwrap(),
+                    "-o",
+                    out.to_str().unwrap(),
+                    "--fov",
+                    "40",
+                ])
+                .args(extra),
+        );
         o.stdout
     };
     let v = json(&run(&["--json"]));
@@ -323,16 +322,15 @@ fn map_takes_the_acuity_threshold_rule() {
     im.y.fill(0.2);
     im.z.fill(0.2);
     im.absolute_units = true;
-    visadapt::io::exr::write_hdr(&im, &mut std::fs::File::create(&input).unwrap()).unwrap();
+    write_exr(&input, &im);
     let out = dir.path().join("out.png");
     let run = |extra: &[&str]| {
-        let o = visadapt()
-            .args(["map", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
-            .args(["--fov", "2"])
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let o = succeed(
+            visadapt()
+                .args(["map", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
+                .args(["--fov", "2"])
+                .args(extra),
+        );
         String::from_utf8(o.stdout).unwrap()
     };
     let pooled = json(run(&["--json"]).as_bytes());
@@ -348,17 +346,15 @@ fn map_takes_the_acuity_threshold_rule() {
     assert!(!run(&[]).contains("the paper's rule"));
 }
 
-/// A `w × h` grey EXR at `l` cd/m² (equal-energy, absolute units), one pixel `odd` if given.
+/// A `w × h` grey EXR at `l` cd/m² (equal-energy, absolute units, no scotopic channel),
+/// one pixel `odd` if given.
 fn grey_exr(path: &std::path::Path, w: usize, h: usize, l: f32, odd: Option<f32>) {
-    let mut im = visadapt::HdrImage::zeros(w, h);
-    im.x.fill(l);
-    im.y.fill(l);
-    im.z.fill(l);
+    let mut im = grey(w, h, l);
+    im.scotopic = None;
     if let Some(v) = odd {
         (im.x[0], im.y[0], im.z[0]) = (v, v, v);
     }
-    im.absolute_units = true;
-    visadapt::io::exr::write_hdr(&im, &mut std::fs::File::create(path).unwrap()).unwrap();
+    write_exr(path, &im);
 }
 
 /// Issue 13: text reports wrote `1.8412e3 cd/m²`; they now write numbers for people (four
@@ -372,13 +368,12 @@ fn text_reports_write_numbers_for_people_and_json_keeps_every_digit() {
     grey_exr(&input, 16, 16, 3682.4, None);
     let out = dir.path().join("out.png");
     let run = |extra: &[&str]| {
-        let o = visadapt()
-            .args(["map", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
-            .args(["--fov", "10"])
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let o = succeed(
+            visadapt()
+                .args(["map", input.to_str().unwrap(), "-o", out.to_str().unwrap()])
+                .args(["--fov", "10"])
+                .args(extra),
+        );
         String::from_utf8(o.stdout).unwrap()
     };
     let l_wa = f64::from(3682.4f32) / 2.0;
@@ -424,16 +419,12 @@ fn text_reports_write_numbers_for_people_and_json_keeps_every_digit() {
 
     // `tolerance`: the same field's threshold, 102.35 cd/m² everywhere.
     let tol = dir.path().join("tol.exr");
-    let o = visadapt()
-        .args([
-            "tolerance",
-            input.to_str().unwrap(),
-            "-o",
-            tol.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = succeed(visadapt().args([
+        "tolerance",
+        input.to_str().unwrap(),
+        "-o",
+        tol.to_str().unwrap(),
+    ]));
     let text = String::from_utf8(o.stdout).unwrap();
     assert!(
         text.contains("adapted to 1841 cd/m² (from the image)")
@@ -448,13 +439,12 @@ fn one_pixel_is_one_pixel() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("nan.exr");
     grey_exr(&input, 8, 8, 100.0, Some(f32::NAN));
-    let o = visadapt()
-        .args(["map", input.to_str().unwrap(), "-o"])
-        .arg(dir.path().join("out.png"))
-        .args(["--fov", "10"])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = succeed(
+        visadapt()
+            .args(["map", input.to_str().unwrap(), "-o"])
+            .arg(dir.path().join("out.png"))
+            .args(["--fov", "10"]),
+    );
     let err = String::from_utf8(o.stderr).unwrap();
     assert!(
         err.contains(": 1 pixel with NaN or infinite values shown black"),

@@ -7,17 +7,6 @@ use predicates::prelude::*;
 use std::path::Path;
 use visadapt::HdrImage;
 
-/// Decoded RGB8 pixels of a (first frame of a) PNG, and its APNG frame count if animated.
-fn png_pixels(path: &Path) -> (Vec<u8>, Option<u32>) {
-    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = dec.read_info().unwrap();
-    let frames = reader.info().animation_control.map(|a| a.num_frames);
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    buf.truncate(info.buffer_size());
-    (buf, frames)
-}
-
 fn f(v: &serde_json::Value, key: &str) -> f64 {
     v[key]
         .as_f64()
@@ -26,24 +15,16 @@ fn f(v: &serde_json::Value, key: &str) -> f64 {
 
 #[test]
 fn timecourse_json_has_the_documented_keys_and_the_model_values() {
-    let out = visadapt()
-        .args([
-            "timecourse",
-            "--from",
-            "0.1",
-            "--to",
-            "5623",
-            "--times",
-            "0,1,10,75,100000",
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = succeed(visadapt().args([
+        "timecourse",
+        "--from",
+        "0.1",
+        "--to",
+        "5623",
+        "--times",
+        "0,1,10,75,100000",
+        "--json",
+    ]));
     let v = json(&out.stdout);
     let rows = v.as_array().unwrap();
     assert_eq!(rows.len(), 5);
@@ -171,21 +152,16 @@ fn sequence_writes_numbered_frames_and_an_animation() {
     let dir = tempfile::tempdir().unwrap();
     let frames = dir.path().join("frames");
     let apng = dir.path().join("anim.png");
-    let out = visadapt()
-        .arg("sequence")
-        .arg(data("mixtex.hdr"))
-        .args([
-            "--from", "0.1", "--to", "5623", "--times", "0,1,75", "--json", "-o",
-        ])
-        .arg(&frames)
-        .arg("--apng")
-        .arg(&apng)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("sequence")
+            .arg(data("mixtex.hdr"))
+            .args([
+                "--from", "0.1", "--to", "5623", "--times", "0,1,75", "--json", "-o",
+            ])
+            .arg(&frames)
+            .arg("--apng")
+            .arg(&apng),
     );
     assert_eq!(
         files_in(&frames),
@@ -218,13 +194,17 @@ fn sequence_writes_numbered_frames_and_an_animation() {
         .assert()
         .success();
     assert_eq!(
-        png_pixels(&frames.join("frame_000.png")).0,
-        png_pixels(&mapped).0
+        read_png(&frames.join("frame_000.png")).samples,
+        read_png(&mapped).samples
     );
     // The animation holds the four frames, the first one being frame 0.
-    let (first, n) = png_pixels(&apng);
+    let Png {
+        samples: first,
+        frames: n,
+        ..
+    } = read_png(&apng);
     assert_eq!(n, Some(4));
-    assert_eq!(first, png_pixels(&frames.join("frame_000.png")).0);
+    assert_eq!(first, read_png(&frames.join("frame_000.png")).samples);
 }
 
 #[test]
@@ -291,18 +271,6 @@ fn scene(w: usize, h: usize, peak: f32) -> HdrImage {
     im
 }
 
-fn write_exr(path: &Path, im: &HdrImage) {
-    let mut f = std::fs::File::create(path).unwrap();
-    visadapt::io::exr::write_hdr(im, &mut f).unwrap();
-}
-
-fn json_lines(out: &[u8]) -> Vec<serde_json::Value> {
-    String::from_utf8_lossy(out)
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
-}
-
 #[test]
 fn video_carries_the_adaptation_from_frame_to_frame() {
     let dir = tempfile::tempdir().unwrap();
@@ -311,22 +279,17 @@ fn video_carries_the_adaptation_from_frame_to_frame() {
     // Three dim frames, then the lights go up to 1000 cd/m² for three frames.
     for n in 0..6 {
         let peak = if n < 3 { 0.1 } else { 1000.0 };
-        write_exr(&input.join(format!("f_{n:04}.exr")), &scene(16, 8, peak));
+        write_exr(input.join(format!("f_{n:04}.exr")), &scene(16, 8, peak));
     }
     std::fs::write(input.join("notes.txt"), "not a frame").unwrap();
     let outdir = dir.path().join("out");
     let pattern = input.join("f_%04d.exr");
-    let out = visadapt()
-        .arg("video")
-        .arg(&pattern)
-        .args(["--fps", "0.5", "--json", "--no-acuity", "-o"])
-        .arg(&outdir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("video")
+            .arg(&pattern)
+            .args(["--fps", "0.5", "--json", "--no-acuity", "-o"])
+            .arg(&outdir),
     );
     let frames = json_lines(&out.stdout);
     assert_eq!(frames.len(), 6);
@@ -372,8 +335,8 @@ fn video_carries_the_adaptation_from_frame_to_frame() {
         .assert()
         .success();
     assert_eq!(
-        png_pixels(&outdir.join("f_0000.png")).0,
-        png_pixels(&mapped).0
+        read_png(&outdir.join("f_0000.png")).samples,
+        read_png(&mapped).samples
     );
 }
 
@@ -388,19 +351,14 @@ fn video_reads_pfm_and_radiance_frames_with_a_scale() {
         .unwrap();
         std::fs::copy(data("mixtex.hdr"), dir.path().join(format!("r{n}.hdr"))).unwrap();
     }
-    let out = visadapt()
-        .arg("video")
-        .arg(dir.path().join("p%d.pfm"))
-        .args([
-            "--fps", "24", "--scale", "100", "--format", "exr", "--json", "-o",
-        ])
-        .arg(dir.path().join("o"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("video")
+            .arg(dir.path().join("p%d.pfm"))
+            .args([
+                "--fps", "24", "--scale", "100", "--format", "exr", "--json", "-o",
+            ])
+            .arg(dir.path().join("o")),
     );
     let frames = json_lines(&out.stdout);
     let max = scene(8, 4, 1.0).y.iter().fold(0.0f32, |a, &b| a.max(b)) as f64;
@@ -423,7 +381,7 @@ fn video_reads_pfm_and_radiance_frames_with_a_scale() {
 fn video_refuses_bad_patterns_and_frame_rates_before_writing() {
     let dir = tempfile::tempdir().unwrap();
     for n in [0, 1, 3] {
-        write_exr(&dir.path().join(format!("g{n}.exr")), &scene(4, 4, 1.0));
+        write_exr(dir.path().join(format!("g{n}.exr")), &scene(4, 4, 1.0));
     }
     let outdir = dir.path().join("out");
     for (pattern, fps, needle) in [
@@ -450,10 +408,10 @@ fn video_refuses_bad_patterns_and_frame_rates_before_writing() {
 #[test]
 fn video_stops_at_a_frame_of_another_size_and_keeps_what_it_wrote() {
     let dir = tempfile::tempdir().unwrap();
-    write_exr(&dir.path().join("v1.exr"), &scene(8, 4, 10.0));
-    write_exr(&dir.path().join("v2.exr"), &scene(8, 4, 20.0));
-    write_exr(&dir.path().join("v3.exr"), &scene(4, 4, 20.0));
-    write_exr(&dir.path().join("v4.exr"), &scene(8, 4, 20.0));
+    write_exr(dir.path().join("v1.exr"), &scene(8, 4, 10.0));
+    write_exr(dir.path().join("v2.exr"), &scene(8, 4, 20.0));
+    write_exr(dir.path().join("v3.exr"), &scene(4, 4, 20.0));
+    write_exr(dir.path().join("v4.exr"), &scene(8, 4, 20.0));
     let outdir = dir.path().join("out");
     let out = visadapt()
         .arg("video")
@@ -471,7 +429,7 @@ fn video_stops_at_a_frame_of_another_size_and_keeps_what_it_wrote() {
     // The two good frames are there, whole, and nothing else (no temporary files).
     assert_eq!(files_in(&outdir), ["v1.png", "v2.png"]);
     for name in ["v1.png", "v2.png"] {
-        assert_eq!(png_pixels(&outdir.join(name)).0.len(), 8 * 4 * 3);
+        assert_eq!(read_png(&outdir.join(name)).samples.len(), 8 * 4 * 3);
     }
     // A corrupt frame: the same, naming it.
     std::fs::write(dir.path().join("v3.exr"), b"v/1\x01 truncated").unwrap();
@@ -491,7 +449,7 @@ fn video_stops_at_a_frame_of_another_size_and_keeps_what_it_wrote() {
 #[test]
 fn video_never_overwrites_its_input() {
     let dir = tempfile::tempdir().unwrap();
-    write_exr(&dir.path().join("w1.exr"), &scene(4, 4, 1.0));
+    write_exr(dir.path().join("w1.exr"), &scene(4, 4, 1.0));
     let before = std::fs::read(dir.path().join("w1.exr")).unwrap();
     let out = visadapt()
         .arg("video")
@@ -541,24 +499,19 @@ fn plot_draws_figures_8_to_10_as_svg_and_png() {
 #[test]
 fn timecourse_undershoot_rule_changes_the_mapping_not_the_threshold() {
     let run = |extra: &[&str]| {
-        let out = visadapt()
-            .args([
-                "timecourse",
-                "--from",
-                "0.1",
-                "--to",
-                "5623",
-                "--times",
-                "180",
-                "--json",
-            ])
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = succeed(
+            visadapt()
+                .args([
+                    "timecourse",
+                    "--from",
+                    "0.1",
+                    "--to",
+                    "5623",
+                    "--times",
+                    "180",
+                    "--json",
+                ])
+                .args(extra),
         );
         json(&out.stdout)[0].clone()
     };
@@ -579,24 +532,16 @@ fn timecourse_undershoot_rule_changes_the_mapping_not_the_threshold() {
 /// break), and in darkness nothing is resolvable (acuity 0).
 #[test]
 fn timecourse_to_darkness_reproduces_figure_10() {
-    let out = visadapt()
-        .args([
-            "timecourse",
-            "--from",
-            "199.526",
-            "--to",
-            "0",
-            "--times",
-            "0,300,390,450,2400",
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = succeed(visadapt().args([
+        "timecourse",
+        "--from",
+        "199.526",
+        "--to",
+        "0",
+        "--times",
+        "0,300,390,450,2400",
+        "--json",
+    ]));
     let v = json(&out.stdout);
     let rows = v.as_array().unwrap();
     let log = |i: usize, k: &str| f(&rows[i], k).log10();
@@ -618,7 +563,7 @@ fn video_pipeline_writes_the_same_bytes_as_one_frame_after_another() {
     let dir = tempfile::tempdir().unwrap();
     let peaks = [500.0, 500.0, 0.05, 0.05, 0.05, 200.0, 200.0, 3.0];
     for (n, peak) in peaks.iter().enumerate() {
-        write_exr(&dir.path().join(format!("s{n}.exr")), &scene(40, 24, *peak));
+        write_exr(dir.path().join(format!("s{n}.exr")), &scene(40, 24, *peak));
     }
     let outdir = dir.path().join("out");
     visadapt()
@@ -795,8 +740,8 @@ fn sequence_label_time_changes_only_the_box() {
     for (i, lib) in expected.iter().enumerate() {
         let name = format!("frame_{i:03}.png");
         assert_eq!(&std::fs::read(plain.join(&name)).unwrap(), lib, "{name}");
-        let (a, _) = png_pixels(&plain.join(&name));
-        let (b, _) = png_pixels(&labelled.join(&name));
+        let a = read_png(&plain.join(&name)).samples;
+        let b = read_png(&labelled.join(&name)).samples;
         let text = seq.frame_label(i).unwrap();
         // The box as the label module draws it: 5x7 glyphs on 6-pixel advances with 2
         // pixels of padding, at one image pixel per font pixel below 300 rows.
@@ -819,7 +764,7 @@ fn sequence_label_time_changes_only_the_box() {
     }
     // The animation carries the labelled frames.
     assert_eq!(
-        png_pixels(&dir.path().join("labelled.png")).0,
-        png_pixels(&labelled.join("frame_000.png")).0
+        read_png(&dir.path().join("labelled.png")).samples,
+        read_png(&labelled.join("frame_000.png")).samples
     );
 }

@@ -4,26 +4,7 @@
 mod common;
 use common::*;
 
-use std::path::{Path, PathBuf};
-use visadapt::{HdrImage, Limits};
-
-/// A grey field at `l` cd/m² (equal-energy, with its scotopic channel), in absolute units.
-fn grey(w: usize, h: usize, l: f32) -> HdrImage {
-    let mut im = HdrImage::zeros(w, h);
-    im.x.fill(l);
-    im.y.fill(l);
-    im.z.fill(l);
-    im.scotopic = Some(vec![2.261 * l; w * h]);
-    im.absolute_units = true;
-    im
-}
-
-fn write(dir: &Path, name: &str, image: &HdrImage) -> PathBuf {
-    let path = dir.join(name);
-    let file = std::fs::File::create(&path).unwrap();
-    visadapt::io::exr::write_hdr(image, std::io::BufWriter::new(file)).unwrap();
-    path
-}
+use visadapt::Limits;
 
 #[test]
 fn bare_visadapt_prints_the_usage_and_the_commands() {
@@ -70,7 +51,7 @@ fn usage_errors_keep_clap_tips_usage_and_pointer_to_help() {
 #[test]
 fn bad_values_are_named_by_the_flag_as_typed_in_one_style() {
     let dir = tempfile::tempdir().unwrap();
-    let input = write(dir.path(), "in.exr", &grey(8, 8, 10.0));
+    let input = write_exr(dir.path().join("in.exr"), &grey(8, 8, 10.0));
     let input = input.to_str().unwrap();
     let cases: [(&[&str], &str); 9] = [
         (
@@ -131,7 +112,7 @@ fn bad_values_are_named_by_the_flag_as_typed_in_one_style() {
 #[test]
 fn format_flags_for_another_format_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let input = write(dir.path(), "in.exr", &grey(8, 8, 10.0));
+    let input = write_exr(dir.path().join("in.exr"), &grey(8, 8, 10.0));
     for (flag, value, output) in [
         ("--bits", "16", "x.jpg"),
         ("--bits", "8", "x.exr"),
@@ -162,7 +143,7 @@ fn format_flags_for_another_format_are_refused() {
 #[test]
 fn a_missing_output_folder_is_named_before_any_work() {
     let dir = tempfile::tempdir().unwrap();
-    let input = write(dir.path(), "in.exr", &grey(8, 8, 10.0));
+    let input = write_exr(dir.path().join("in.exr"), &grey(8, 8, 10.0));
     let missing = dir.path().join("no-such-folder");
     let commands: [Vec<String>; 4] = [
         vec!["map".into(), input.display().to_string(), "-o".into()],
@@ -216,7 +197,7 @@ fn an_empty_file_is_called_empty() {
 #[test]
 fn perspective_views_of_180_degrees_or_more_are_refused_fisheyes_kept() {
     let dir = tempfile::tempdir().unwrap();
-    let input = write(dir.path(), "in.exr", &grey(400, 200, 0.01));
+    let input = write_exr(dir.path().join("in.exr"), &grey(400, 200, 0.01));
     let out = visadapt()
         .current_dir(dir.path())
         .arg("map")
@@ -234,25 +215,20 @@ fn perspective_views_of_180_degrees_or_more_are_refused_fisheyes_kept() {
 
     // An angular fisheye spreads its 400 pixels evenly over 200 degrees: 2 pixels/degree,
     // and the blur is the acuity Gaussian's sigma in degrees times that.
-    let out = visadapt()
-        .current_dir(dir.path())
-        .arg("map")
-        .arg(&input)
-        .args([
-            "-o",
-            "x.png",
-            "--fov",
-            "200",
-            "--projection",
-            "fisheye",
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .current_dir(dir.path())
+            .arg("map")
+            .arg(&input)
+            .args([
+                "-o",
+                "x.png",
+                "--fov",
+                "200",
+                "--projection",
+                "fisheye",
+                "--json",
+            ]),
     );
     let v = json(&out.stdout);
     assert!(
@@ -277,7 +253,7 @@ fn perspective_views_of_180_degrees_or_more_are_refused_fisheyes_kept() {
 #[test]
 fn visible_writes_the_jnd_map_as_exr_and_names_both_formats() {
     let dir = tempfile::tempdir().unwrap();
-    let reference = write(dir.path(), "a.exr", &grey(16, 8, 100.0));
+    let reference = write_exr(dir.path().join("a.exr"), &grey(16, 8, 100.0));
     let mut brighter = grey(16, 8, 100.0);
     // The right half 20 % brighter: far above threshold there, nothing on the left.
     for y in 0..8 {
@@ -289,20 +265,15 @@ fn visible_writes_the_jnd_map_as_exr_and_names_both_formats() {
             brighter.scotopic.as_mut().unwrap()[i] *= 1.2;
         }
     }
-    let test = write(dir.path(), "b.exr", &brighter);
+    let test = write_exr(dir.path().join("b.exr"), &brighter);
     let map = dir.path().join("jnd.exr");
-    let out = visadapt()
-        .arg("visible")
-        .arg(&reference)
-        .arg(&test)
-        .args(["--no-acuity", "--json", "-o"])
-        .arg(&map)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("visible")
+            .arg(&reference)
+            .arg(&test)
+            .args(["--no-acuity", "--json", "-o"])
+            .arg(&map),
     );
     let v = json(&out.stdout);
     let jnd = visadapt::io::read(&map, &Limits::default()).unwrap();
@@ -377,7 +348,7 @@ fn the_charts_view_travels_in_its_exr_and_a_default_view_is_warned_about() {
     assert!(!String::from_utf8_lossy(&out.stderr).contains("view"));
 
     // A file without a view, acuity on: one warning naming the file and the guess.
-    let plain = write(dir.path(), "plain.exr", &grey(32, 16, 10.0));
+    let plain = write_exr(dir.path().join("plain.exr"), &grey(32, 16, 10.0));
     let out = visadapt()
         .arg("map")
         .arg(&plain)

@@ -6,17 +6,6 @@ use common::*;
 use std::path::{Path, PathBuf};
 use visadapt::{HdrImage, Limits};
 
-/// An equal-energy grey field at `l` cd/m² with its scotopic channel (S/P 2.261).
-fn grey(w: usize, h: usize, l: f32) -> HdrImage {
-    let mut im = HdrImage::zeros(w, h);
-    im.x.fill(l);
-    im.y.fill(l);
-    im.z.fill(l);
-    im.scotopic = Some(vec![2.261 * l; w * h]);
-    im.absolute_units = true;
-    im
-}
-
 /// `image` changed by `delta[i]` cd/m² at each pixel, in its own colour.
 fn perturbed(image: &HdrImage, delta: impl Fn(usize, usize) -> f64) -> HdrImage {
     let mut out = image.clone();
@@ -35,13 +24,6 @@ fn perturbed(image: &HdrImage, delta: impl Fn(usize, usize) -> f64) -> HdrImage 
     out
 }
 
-fn write(dir: &Path, name: &str, image: &HdrImage) -> PathBuf {
-    let path = dir.join(name);
-    let file = std::fs::File::create(&path).unwrap();
-    visadapt::io::exr::write_hdr(image, std::io::BufWriter::new(file)).unwrap();
-    path
-}
-
 /// A 64×32 grey field at 100 cd/m², and the same with ±3 thresholds of noise (random
 /// sign) on its left half and ±0.5 threshold on its right half; the threshold is
 /// t_p(50) = 3.0878 cd/m², the observer adapting to half the field's luminance.
@@ -53,8 +35,8 @@ fn noisy_pair(dir: &Path) -> (PathBuf, PathBuf) {
         sign * t * if x < 32 { 3.0 } else { 0.5 }
     });
     (
-        write(dir, "ref.exr", &reference),
-        write(dir, "test.exr", &test),
+        write_exr(dir.join("ref.exr"), &reference),
+        write_exr(dir.join("test.exr"), &test),
     )
 }
 
@@ -62,17 +44,12 @@ fn noisy_pair(dir: &Path) -> (PathBuf, PathBuf) {
 fn identical_images_show_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let (reference, _) = noisy_pair(dir.path());
-    let out = visadapt()
-        .arg("visible")
-        .arg(&reference)
-        .arg(&reference)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("visible")
+            .arg(&reference)
+            .arg(&reference)
+            .arg("--json"),
     );
     let v = json(&out.stdout);
     assert_eq!(v["visible_fraction"], 0.0);
@@ -86,19 +63,14 @@ fn noise_is_reported_in_jnds_with_a_heat_map() {
     let dir = tempfile::tempdir().unwrap();
     let (reference, test) = noisy_pair(dir.path());
     let map = dir.path().join("map.png");
-    let out = visadapt()
-        .arg("visible")
-        .arg(&reference)
-        .arg(&test)
-        .arg("-o")
-        .arg(&map)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("visible")
+            .arg(&reference)
+            .arg(&test)
+            .arg("-o")
+            .arg(&map)
+            .arg("--json"),
     );
     let v = json(&out.stdout);
     for key in [
@@ -125,12 +97,9 @@ fn noise_is_reported_in_jnds_with_a_heat_map() {
     // The heat map: the image, then a colour bar panel; at least 240 px high. The 64×32
     // image is enlarged 7 times (224 rows, the most whole pixels within 240) and centred
     // vertically, 8 rows above and below (issue 13: it sat unenlarged in the top corner).
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&map).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let (w, h) = (reader.info().width as usize, reader.info().height as usize);
+    let heat = read_png(&map);
+    let (w, h, rgb) = (heat.width as usize, heat.height as usize, heat.samples);
     assert_eq!((w, h), (7 * 64 + 150, 240));
-    let mut rgb = vec![0u8; reader.output_buffer_size().unwrap()];
-    reader.next_frame(&mut rgb).unwrap();
     let px = |x: usize, y: usize| {
         let i = (y * w + x) * 3;
         [rgb[i], rgb[i + 1], rgb[i + 2]]
@@ -190,18 +159,12 @@ fn text_report_names_the_results() {
 fn the_same_noise_is_invisible_at_night() {
     let dir = tempfile::tempdir().unwrap();
     let (reference, test) = noisy_pair(dir.path());
-    let out = visadapt()
-        .arg("visible")
-        .arg(&reference)
-        .arg(&test)
-        .args(["--peak", "0.01", "--no-acuity", "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = succeed(visadapt().arg("visible").arg(&reference).arg(&test).args([
+        "--peak",
+        "0.01",
+        "--no-acuity",
+        "--json",
+    ]));
     let v = json(&out.stdout);
     assert_eq!(v["visible_fraction"], 0.0);
     // Adapted to 0.005 cd/m² and 0.0113 scotopic cd/m² (k = 1); the left half changes by
@@ -220,18 +183,13 @@ fn given_adaptation_and_field_of_view() {
     let dir = tempfile::tempdir().unwrap();
     let (reference, test) = noisy_pair(dir.path());
     let run = |extra: &[&str]| {
-        let out = visadapt()
-            .arg("visible")
-            .arg(&reference)
-            .arg(&test)
-            .arg("--json")
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = succeed(
+            visadapt()
+                .arg("visible")
+                .arg(&reference)
+                .arg(&test)
+                .arg("--json")
+                .args(extra),
         );
         json(&out.stdout)
     };
@@ -262,8 +220,8 @@ fn given_adaptation_and_field_of_view() {
 #[test]
 fn images_of_different_sizes_give_one_clear_error() {
     let dir = tempfile::tempdir().unwrap();
-    let a = write(dir.path(), "a.exr", &grey(64, 32, 1.0));
-    let b = write(dir.path(), "b.exr", &grey(32, 64, 1.0));
+    let a = write_exr(dir.path().join("a.exr"), &grey(64, 32, 1.0));
+    let b = write_exr(dir.path().join("b.exr"), &grey(32, 64, 1.0));
     let map = dir.path().join("map.png");
     let out = visadapt()
         .arg("visible")
@@ -286,7 +244,7 @@ fn images_of_different_sizes_give_one_clear_error() {
 #[test]
 fn unreadable_images_give_one_clear_error_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
-    let good = write(dir.path(), "good.exr", &grey(16, 16, 1.0));
+    let good = write_exr(dir.path().join("good.exr"), &grey(16, 16, 1.0));
     let garbage = dir.path().join("garbage.hdr");
     std::fs::write(&garbage, b"this is not an image").unwrap();
     let missing = dir.path().join("missing.exr");
@@ -315,7 +273,7 @@ fn unreadable_images_give_one_clear_error_naming_the_file() {
 #[test]
 fn bad_arguments_are_refused_before_reading() {
     let dir = tempfile::tempdir().unwrap();
-    let good = write(dir.path(), "good.exr", &grey(16, 16, 1.0));
+    let good = write_exr(dir.path().join("good.exr"), &grey(16, 16, 1.0));
     for (extra, needle) in [
         (vec!["-o", "map.jpg"], "map.jpg"),
         (vec!["--fov", "0"], "--fov"),
@@ -350,20 +308,15 @@ fn bad_arguments_are_refused_before_reading() {
 #[test]
 fn tolerance_map_is_written_in_cd_m2() {
     let dir = tempfile::tempdir().unwrap();
-    let input = write(dir.path(), "in.exr", &grey(40, 20, 100.0));
+    let input = write_exr(dir.path().join("in.exr"), &grey(40, 20, 100.0));
     let tol = dir.path().join("tol.exr");
-    let out = visadapt()
-        .arg("tolerance")
-        .arg(&input)
-        .arg("-o")
-        .arg(&tol)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("tolerance")
+            .arg(&input)
+            .arg("-o")
+            .arg(&tol)
+            .arg("--json"),
     );
     let v = json(&out.stdout);
     assert!((v["median_tolerance_cd_m2"].as_f64().unwrap() / tp(50.0) - 1.0).abs() < 1e-6);
@@ -383,18 +336,13 @@ fn tolerance_map_is_written_in_cd_m2() {
 
     // Starlight: the same field at 0.002 cd/m²: the rods set the threshold,
     // t_s(0.002261)/2.261 = 1.0832e-3 cd/m², 54 % of the luminance.
-    let out = visadapt()
-        .arg("tolerance")
-        .arg(&input)
-        .arg("-o")
-        .arg(&tol)
-        .args(["--peak", "0.002", "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = succeed(
+        visadapt()
+            .arg("tolerance")
+            .arg(&input)
+            .arg("-o")
+            .arg(&tol)
+            .args(["--peak", "0.002", "--json"]),
     );
     let v = json(&out.stdout);
     let expected = ts(0.002_261) / 2.261;
@@ -424,7 +372,7 @@ fn tolerance_bad_input_gives_one_clear_error_and_no_output() {
         let e = one_line_error(&out.stderr);
         assert!(e.contains(name), "{e}");
     }
-    let input = write(dir.path(), "in.exr", &grey(8, 8, 1.0));
+    let input = write_exr(dir.path().join("in.exr"), &grey(8, 8, 1.0));
     let out = visadapt()
         .arg("tolerance")
         .arg(&input)
@@ -461,7 +409,7 @@ fn tolerance_takes_the_view_flags() {
             field.scotopic.as_mut().unwrap()[i] = 2.261 * l;
         }
     }
-    let input = write(dir.path(), "ramp.exr", &field);
+    let input = write_exr(dir.path().join("ramp.exr"), &field);
     let run = |extra: &[&str]| -> Vec<f32> {
         let tol = dir.path().join("tol.exr");
         let out = visadapt()

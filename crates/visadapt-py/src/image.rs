@@ -166,7 +166,14 @@ fn wrap(inner: visadapt::HdrImage) -> PyResult<HdrImage> {
 }
 
 /// Read an HDR image: Radiance (.hdr, .pic), OpenEXR or PFM, detected from the file's first
-/// bytes.
+/// bytes; or an 8/16-bit PNG, JPEG or TIFF photograph (LDR input).
+///
+/// A photograph is display-referred: its sRGB curve is undone (IEC 61966-2-1), its
+/// primaries taken as Rec. 709 with a D65 white, and code-value white read as Y = 1 in
+/// relative units (`HdrImage.absolute_units` is False). State the luminance of that white
+/// with `map(image, scale=...)` (e.g. `scale=0.05`: the photo's white at 0.05 cd/m²) or
+/// `peak=`. Such a photo is already tone-mapped and clipped by its camera, so the result
+/// is an illustration, not a prediction. No ICC profile is read.
 ///
 /// Args:
 ///     path: the file.

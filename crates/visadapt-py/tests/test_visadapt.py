@@ -505,3 +505,21 @@ def test_every_stubbed_condition_is_accepted():
         visadapt.map(image, **{key: None})  # None is the default of each
     with pytest.raises(TypeError):
         visadapt.map(image, not_a_condition=1)
+
+
+def test_read_takes_photographs_in_relative_units_stated_with_scale(tmp_path):
+    # Issue 13: read() said nothing of LDR input or of how to state its luminance.
+    doc = visadapt.read.__doc__
+    for word in ("PNG", "JPEG", "TIFF", "sRGB", "scale="):
+        assert word in doc, word
+    display, _ = visadapt.map(visadapt.chart(white=50))
+    visadapt.write(tmp_path / "photo.png", display)
+    photo = visadapt.read(tmp_path / "photo.png")
+    assert not photo.absolute_units
+    y = photo.xyz[..., 1]
+    # Code-value white is Y = 1 (the sRGB curve undone, Rec. 709 primaries).
+    assert 0.5 < y.max() <= 1.0 + 1e-6
+    _, report = visadapt.map(photo, scale=0.05)
+    _, unscaled = visadapt.map(photo)
+    ratio = report["highest_visible_cd_m2"] / unscaled["highest_visible_cd_m2"]
+    assert abs(ratio - 0.05) < 1e-6 * 0.05

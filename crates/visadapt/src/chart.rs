@@ -10,19 +10,21 @@
 //! * **ColorChecker**: the 24 patches (N. Ohta's reflectances, [`spectral`]), 40 mm square
 //!   with 6 mm gaps on a black card (282 × 190 mm, close to the ColorChecker Classic's
 //!   279 × 216 mm).
-//! * **Snellen chart**: Sloan-style letters on a 5 × 5 stroke grid (a letter of line 20/x is
-//!   5·x/20 arcminutes tall at the design distance of 20 ft = 6.096 m, its strokes a fifth
-//!   of that), lines 20/200 to 20/10 ([`SNELLEN_LINES`]), black ink (the ColorChecker's
-//!   "black 2") on white paper ("white 9.5").
+//! * **Snellen chart**: Sloan's optotypes ([`sloan`]: a square of 5 stroke widths, round
+//!   strokes where the letters are round; a letter of line 20/x is 5·x/20 arcminutes tall
+//!   at the design distance of 20 ft = 6.096 m, its strokes a fifth of that), lines 20/200
+//!   to 20/10 ([`SNELLEN_LINES`]), black ink (the ColorChecker's "black 2") on white paper
+//!   ("white 9.5").
 //! * **Gratings** (optional): square-wave gratings of 2 to 32 cycles/degree at the design
 //!   distance ([`GRATING_CYCLES_PER_DEGREE`]), the stimulus of Shaler's acuity data (Fig. 7).
 //! * **Wall**: the reflectance of the ColorChecker's "neutral 5".
 //!
 //! Every surface reflects the equal-energy illuminant E; radiance is integrated at 5 nm to
 //! CIE X, Y, Z (cd/m²) and scotopic luminance (scotopic cd/m², K'm = 1700 lm/W), scaled so
-//! that the white patch (and the paper) has luminance `white_cd_m2`. Edges are area-sampled
-//! exactly (every shape is an axis-aligned rectangle, so each pixel gets the exact fraction
-//! of its area each surface covers).
+//! that the white patch (and the paper) has luminance `white_cd_m2`. Edges are area-sampled:
+//! the rectangles (patches, paper, gratings) exactly, each pixel getting the fraction of its
+//! area each surface covers; the letters to 1/256 of a pixel ([`sloan::SAMPLES`]), exactly
+//! where their straight edges fall on pixel boundaries.
 //!
 //! # Geometry
 //!
@@ -40,6 +42,9 @@ use crate::colour::{REC709, mul_vec};
 use crate::spectral::{self, EQUAL_ENERGY, Photometry, integrate, reflected};
 use crate::{DisplayImage, Error, HdrImage, Result, View};
 use std::f64::consts::PI;
+
+pub mod sloan;
+pub use sloan::Optotype;
 
 /// The distance for which a Snellen chart is designed: 20 feet, in metres (Snellen 1862; the
 /// "20" of "20/20").
@@ -88,25 +93,6 @@ const GRATING_ROW_GAP_MM: f64 = 50.0;
 /// Grating squares are 1 degree (at the design distance) on a side, 0.15 degree apart.
 const GRATING_SIZE_DEG: f64 = 1.0;
 const GRATING_GAP_DEG: f64 = 0.15;
-
-/// Sloan-style letters on a 5 × 5 stroke grid; each row is 5 bits, the most significant the
-/// leftmost cell.
-fn glyph(c: char) -> Option<[u8; 5]> {
-    Some(match c {
-        'C' => [0b01111, 0b10000, 0b10000, 0b10000, 0b01111],
-        'D' => [0b11110, 0b10001, 0b10001, 0b10001, 0b11110],
-        'E' => [0b11111, 0b10000, 0b11111, 0b10000, 0b11111],
-        'H' => [0b10001, 0b10001, 0b11111, 0b10001, 0b10001],
-        'K' => [0b10001, 0b10010, 0b11100, 0b10010, 0b10001],
-        'N' => [0b10001, 0b11001, 0b10101, 0b10011, 0b10001],
-        'O' => [0b01110, 0b10001, 0b10001, 0b10001, 0b01110],
-        'R' => [0b11110, 0b10001, 0b11110, 0b10010, 0b10001],
-        'S' => [0b01111, 0b10000, 0b01110, 0b00001, 0b11110],
-        'V' => [0b10001, 0b10001, 0b10001, 0b01010, 0b00100],
-        'Z' => [0b11111, 0b00010, 0b00100, 0b01000, 0b11111],
-        _ => return None,
-    })
-}
 
 /// How the chart is lit, seen and sampled.
 #[derive(Debug, Clone, PartialEq)]
@@ -301,6 +287,11 @@ pub struct Patch {
     pub photometry: Photometry,
 }
 
+/// A grid cell counts as ink (or paper) in stroke contrasts when at least this fraction of
+/// it is ink (or paper): a project choice, so that the cells a curve or a slanted stroke
+/// crosses do not mix ink and paper into either reading.
+pub const SOLID_CELL: f64 = 0.9;
+
 /// One letter of the Snellen chart.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Letter {
@@ -315,9 +306,26 @@ pub struct Letter {
 }
 
 impl Letter {
-    /// Whether grid cell (`row`, `col`) is ink.
+    /// The fraction of grid cell (`row`, `col`) that is ink ([`sloan`]: 0 or 1 for the cells
+    /// of the bars, between for those a curve or a slanted stroke crosses).
+    pub fn cell_coverage(&self, row: usize, col: usize) -> f64 {
+        Optotype::new(self.letter).map_or(0.0, |o| o.coverage(col, row, 0.0, 0.0, 1.0))
+    }
+
+    /// Whether grid cell (`row`, `col`) is ink: at least [`SOLID_CELL`] of it.
     pub fn is_ink(&self, row: usize, col: usize) -> bool {
-        glyph(self.letter).is_some_and(|g| g[row] & (0b10000 >> col) != 0)
+        self.cell_coverage(row, col) >= SOLID_CELL
+    }
+
+    /// Whether grid cell (`row`, `col`) is paper: at most `1 −` [`SOLID_CELL`] of it ink.
+    /// Cells neither ink nor paper (crossed by an edge) are left out of stroke contrasts.
+    pub fn is_paper(&self, row: usize, col: usize) -> bool {
+        self.cell_coverage(row, col) <= 1.0 - SOLID_CELL
+    }
+
+    /// The fraction of pixel (`i`, `j`) the letter's ink covers ([`sloan`]).
+    pub fn coverage(&self, i: usize, j: usize) -> f64 {
+        Optotype::new(self.letter).map_or(0.0, |o| o.coverage(i, j, self.x, self.y, self.cell_px))
     }
 
     /// The rectangle of grid cell (`row`, `col`).
@@ -465,6 +473,35 @@ impl Canvas {
     }
 }
 
+impl Canvas {
+    /// Paint `material` over the pixels of `bounds` in the fractions `coverage(i, j)`.
+    fn paint_coverage(
+        &mut self,
+        bounds: &Rect,
+        material: &Photometry,
+        coverage: impl Fn(usize, usize) -> f64,
+    ) {
+        let (i0, j0) = (
+            bounds.x0.max(0.0).floor() as usize,
+            bounds.y0.max(0.0).floor() as usize,
+        );
+        let i1 = (bounds.x1.max(0.0).ceil() as usize).min(self.width);
+        let j1 = (bounds.y1.max(0.0).ceil() as usize).min(self.height);
+        let m = [material.x, material.y, material.z, material.scotopic];
+        for j in j0..j1 {
+            for i in i0..i1 {
+                let c = coverage(i, j).min(1.0);
+                if c > 0.0 {
+                    let p = j * self.width + i;
+                    for (plane, m) in self.planes.iter_mut().zip(m) {
+                        plane[p] = (1.0 - c) * plane[p] + c * m;
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Length of `[a, b]` inside the pixel `[i, i + 1]`.
 fn overlap(i: f64, a: f64, b: f64) -> f64 {
     ((i + 1.0).min(b) - i.max(a)).max(0.0)
@@ -546,12 +583,10 @@ impl Chart {
                 })
                 .collect();
             for l in &letters {
-                let cells: Vec<Rect> = (0..5)
-                    .flat_map(|r| (0..5).map(move |c| (r, c)))
-                    .filter(|&(r, c)| l.is_ink(r, c))
-                    .map(|(r, c)| l.cell(r, c))
-                    .collect();
-                canvas.paint(&cells, &ink);
+                let optotype = Optotype::new(l.letter).expect("the chart's letters are Sloan's");
+                canvas.paint_coverage(&l.rect(), &ink, |i, j| {
+                    optotype.coverage(i, j, l.x, l.y, l.cell_px)
+                });
             }
             let last = lines.len() + 1 == SNELLEN_LINES.len();
             lines.push(SnellenLine {
@@ -814,7 +849,7 @@ impl Readings {
                             if l.is_ink(row, col) {
                                 ink += v;
                                 n_ink += 1;
-                            } else {
+                            } else if l.is_paper(row, col) {
                                 paper += v;
                                 n_paper += 1;
                             }
@@ -984,15 +1019,27 @@ mod tests {
         }
         let names: Vec<u32> = c.layout.lines.iter().map(|l| l.denominator).collect();
         assert_eq!(names, SNELLEN_LINES);
-        // The 20/20 letters are pixel-aligned: ink cells are pure ink, paper cells pure paper.
+        // The 20/20 letters are pixel-aligned: each pixel is paper and ink in the fractions
+        // the letter covers, and the H (bars only) has pure ink and pure paper cells.
         let line = &c.layout.lines[7];
         let (ink, paper) = (c.layout.patches[BLACK_PATCH].photometry.y, 10.0);
         for l in &line.letters {
-            for row in 0..5 {
-                for col in 0..5 {
-                    let v = mean(&c.image.y, &c, &l.cell(row, col));
-                    let want = if l.is_ink(row, col) { ink } else { paper };
-                    assert!((v - want).abs() < 1e-4, "{} ({row},{col}): {v}", l.letter);
+            let r = l.rect();
+            for j in r.y0 as usize..r.y1 as usize {
+                for i in r.x0 as usize..r.x1 as usize {
+                    let cover = l.coverage(i, j);
+                    let want = (1.0 - cover) * paper + cover * ink;
+                    let v = c.image.y[j * c.image.width + i] as f64;
+                    assert!((v - want).abs() < 1e-4, "{} ({i},{j}): {v}", l.letter);
+                }
+            }
+            if l.letter == 'H' {
+                for row in 0..5 {
+                    for col in 0..5 {
+                        let v = mean(&c.image.y, &c, &l.cell(row, col));
+                        let want = if l.is_ink(row, col) { ink } else { paper };
+                        assert!((v - want).abs() < 1e-4, "H ({row},{col}): {v}");
+                    }
                 }
             }
         }

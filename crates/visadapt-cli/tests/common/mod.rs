@@ -3,6 +3,7 @@
 
 use assert_cmd::Command;
 use std::path::{Path, PathBuf};
+use visadapt::HdrImage;
 
 pub fn visadapt() -> Command {
     Command::cargo_bin("visadapt").unwrap()
@@ -75,4 +76,71 @@ pub fn cli_error(stderr: &[u8]) -> String {
     } else {
         one_line_error(stderr)
     }
+}
+
+/// An equal-energy grey field at `l` cd/m² with its scotopic channel (S/P 2.261), in
+/// absolute units.
+pub fn grey(w: usize, h: usize, l: f32) -> HdrImage {
+    let mut im = HdrImage::zeros(w, h);
+    im.x.fill(l);
+    im.y.fill(l);
+    im.z.fill(l);
+    im.scotopic = Some(vec![2.261 * l; w * h]);
+    im.absolute_units = true;
+    im
+}
+
+/// Write `image` as the OpenEXR `path` (its folders created); returns the path.
+pub fn write_exr(path: impl AsRef<Path>, image: &HdrImage) -> PathBuf {
+    let path = path.as_ref().to_path_buf();
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let file = std::fs::File::create(&path).unwrap();
+    visadapt::io::exr::write_hdr(image, std::io::BufWriter::new(file)).unwrap();
+    path
+}
+
+/// A decoded PNG (its first frame).
+pub struct Png {
+    pub width: u32,
+    pub height: u32,
+    pub color_type: png::ColorType,
+    /// The samples, interleaved, 8 or 16 bits as in the file.
+    pub samples: Vec<u8>,
+    /// The number of frames of an animated PNG.
+    pub frames: Option<u32>,
+}
+
+pub fn read_png(path: &Path) -> Png {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let frames = reader.info().animation_control.map(|a| a.num_frames);
+    let mut samples = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut samples).unwrap();
+    samples.truncate(info.buffer_size());
+    Png {
+        width: info.width,
+        height: info.height,
+        color_type: info.color_type,
+        samples,
+        frames,
+    }
+}
+
+/// Run a command that must succeed (its standard error in the failure); its output.
+pub fn succeed(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Standard output of one JSON value per line.
+pub fn json_lines(out: &[u8]) -> Vec<serde_json::Value> {
+    String::from_utf8_lossy(out)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
 }
