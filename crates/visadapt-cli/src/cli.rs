@@ -943,9 +943,12 @@ const SEQUENCE_EXAMPLES: &str = "\
 Examples:
   visadapt sequence scene.hdr --from 0.1 --to 5623 --times 0,1,4,15,30,75 -o light/ --apng light.png
   visadapt sequence scene.hdr --from 1412 --to 0.1 --times 0,20,45,90,150,210 -o dark/
+  visadapt sequence scene.hdr --from 1412 --to 0.1 --times 0,60,300,900 -o dark/ --label-time
 
 Frame 0 (frame_000.png) shows the scene at --from, adapted; frame i the scene at --to, the i-th
-time after the switch. Levels are the scene's highest visible luminance, as with map --peak.";
+time after the switch. Levels are the scene's highest visible luminance, as with map --peak.
+The animation keeps the real time between frames, sped up to last --apng-seconds (6 s: Fig.
+12a's 75 s play 18.75 times faster, between a 1 s hold of the first and of the last frame).";
 
 const VIDEO_EXAMPLES: &str = "\
 Examples:
@@ -1005,13 +1008,26 @@ pub struct SequenceArgs {
     #[arg(short, long, value_name = "DIR")]
     pub output: PathBuf,
 
-    /// Also write all frames as one animated PNG.
+    /// Also write all frames as one animated PNG, in the real time of the sequence sped
+    /// up to play in --apng-seconds: each frame shows until the next frame's time; the
+    /// first (before the switch) and the last are held for a sixth of the playback each.
+    /// The speed-up is printed.
     #[arg(long, value_name = "FILE")]
     pub apng: Option<PathBuf>,
 
-    /// How long the animated PNG shows each frame, milliseconds.
-    #[arg(long, value_name = "MS", default_value_t = 1000)]
-    pub apng_delay_ms: u16,
+    /// Length of the animated PNG, seconds (0.1 to 60).
+    #[arg(long, value_name = "S", default_value_t = 6.0, allow_negative_numbers = true, value_parser = positive)]
+    pub apng_seconds: f64,
+
+    /// Show every frame of the animated PNG for the same time, milliseconds, instead of
+    /// the real time steps.
+    #[arg(long, value_name = "MS", conflicts_with = "apng_seconds")]
+    pub apng_delay_ms: Option<u16>,
+
+    /// Write the light level and the time after the switch into each frame (and the
+    /// animation), in a box in the top-left corner.
+    #[arg(long)]
+    pub label_time: bool,
 
     #[command(flatten)]
     pub display: DisplayArgs,

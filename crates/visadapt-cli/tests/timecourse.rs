@@ -670,3 +670,156 @@ fn video_pipeline_writes_the_same_bytes_as_one_frame_after_another() {
         assert!(same, "frame {n} differs from the frame-by-frame PNG");
     }
 }
+
+/// The delays of an APNG, ms, frame by frame (the fcTL chunk of each frame).
+fn apng_delays_ms(path: &Path) -> Vec<u16> {
+    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let mut delays = Vec::new();
+    while reader.next_frame(&mut buf).is_ok() {
+        let fc = reader.info().frame_control.unwrap();
+        assert_eq!(fc.delay_den, 1000);
+        delays.push(fc.delay_num);
+    }
+    delays
+}
+
+/// `sequence --apng` plays the real time steps sped up to --apng-seconds (6 s by
+/// default), and says by how much; --apng-delay-ms keeps equal delays.
+#[test]
+fn sequence_animation_keeps_the_real_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let apng = dir.path().join("anim.png");
+    let run = |extra: &[&str]| {
+        let out = visadapt()
+            .arg("sequence")
+            .arg(data("mixtex.hdr"))
+            .args([
+                "--from",
+                "0.1",
+                "--to",
+                "5623",
+                "--times",
+                "0,1,4,15,30,75",
+                "-o",
+            ])
+            .arg(dir.path().join("frames"))
+            .arg("--apng")
+            .arg(&apng)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    // 6 s: a 1 s hold of the first and last frames, 75 s of the sequence in 4 s.
+    let text = run(&[]);
+    assert_eq!(apng_delays_ms(&apng), [1000, 53, 160, 587, 800, 2400, 1000]);
+    assert!(text.contains("18.75 times faster"), "{text}");
+    // 12 s: every delay doubles, to the millisecond.
+    let json = json(run(&["--apng-seconds", "12", "--json"]).as_bytes());
+    assert_eq!(
+        apng_delays_ms(&apng),
+        [2000, 107, 320, 1173, 1600, 4800, 2000]
+    );
+    assert_eq!(json["apng_speedup"].as_f64(), Some(9.375));
+    assert_eq!(json["apng_delays_ms"][5].as_u64(), Some(4800));
+    // Equal delays on request.
+    run(&["--apng-delay-ms", "250"]);
+    assert_eq!(apng_delays_ms(&apng), [250; 7]);
+    // Bad lengths, and both flags at once, are refused before any work.
+    for (extra, needle) in [
+        (&["--apng-seconds", "61"][..], "--apng-seconds"),
+        (&["--apng-seconds", "0"][..], "--apng-seconds"),
+        (
+            &["--apng-seconds", "6", "--apng-delay-ms", "100"][..],
+            "--apng-delay-ms",
+        ),
+    ] {
+        let out = visadapt()
+            .arg("sequence")
+            .arg(data("mixtex.hdr"))
+            .args(["--from", "0.1", "--to", "10", "--times", "1", "-o"])
+            .arg(dir.path().join("bad"))
+            .arg("--apng")
+            .arg(dir.path().join("bad.png"))
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{extra:?}");
+        assert!(cli_error(&out.stderr).contains(needle), "{extra:?}");
+        assert!(!dir.path().join("bad").exists() && !dir.path().join("bad.png").exists());
+    }
+}
+
+/// `sequence --label-time`: each frame carries its light level and time in a box in the
+/// top-left corner, and only the box differs from the unlabelled frame; without the flag
+/// the frames are, byte for byte, the library's own PNGs of the sequence.
+#[test]
+fn sequence_label_time_changes_only_the_box() {
+    use visadapt::sequence::{self, Sequence};
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let frames = dir.path().join(name);
+        visadapt()
+            .arg("sequence")
+            .arg(data("mixtex.hdr"))
+            .args(["--from", "1412", "--to", "0.1", "--times", "0,20,210", "-o"])
+            .arg(&frames)
+            .arg("--apng")
+            .arg(dir.path().join(format!("{name}.png")))
+            .args(extra)
+            .assert()
+            .success();
+        frames
+    };
+    let plain = run("plain", &[]);
+    let labelled = run("labelled", &["--label-time"]);
+    // The library's frames, written as PNG by the library.
+    let scene = visadapt::io::read(&data("mixtex.hdr"), &visadapt::Limits::default()).unwrap();
+    let seq = Sequence::new(1412.0, 0.1, vec![0.0, 20.0, 210.0]).unwrap();
+    let mut expected = Vec::new();
+    sequence::render(&scene, &seq, &Default::default(), |f| {
+        let path = dir.path().join(format!("lib-{}.png", f.index));
+        visadapt::io::write_display(f.image, &path, visadapt::io::OutputFormat::Png { bits: 8 })?;
+        expected.push(std::fs::read(&path).unwrap());
+        Ok(())
+    })
+    .unwrap();
+    let (w, h) = (scene.width, scene.height);
+    for (i, lib) in expected.iter().enumerate() {
+        let name = format!("frame_{i:03}.png");
+        assert_eq!(&std::fs::read(plain.join(&name)).unwrap(), lib, "{name}");
+        let (a, _) = png_pixels(&plain.join(&name));
+        let (b, _) = png_pixels(&labelled.join(&name));
+        let text = seq.frame_label(i).unwrap();
+        // The box as the label module draws it: 5x7 glyphs on 6-pixel advances with 2
+        // pixels of padding, at one image pixel per font pixel below 300 rows.
+        assert!(h < 300);
+        let (bw, bh) = ((6 * text.chars().count() - 1 + 4).min(w), 11.min(h));
+        let mut changed = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let k = 3 * (y * w + x);
+                if x < bw && y < bh {
+                    let px = &b[k..k + 3];
+                    assert!(px == [255; 3] || px == [0; 3], "{name} ({x}, {y}): {px:?}");
+                    changed += usize::from(px != &a[k..k + 3]);
+                } else {
+                    assert_eq!(a[k..k + 3], b[k..k + 3], "{name} ({x}, {y})");
+                }
+            }
+        }
+        assert!(changed > bw * bh / 2, "{name}: {changed}");
+    }
+    // The animation carries the labelled frames.
+    assert_eq!(
+        png_pixels(&dir.path().join("labelled.png")).0,
+        png_pixels(&labelled.join("frame_000.png")).0
+    );
+}

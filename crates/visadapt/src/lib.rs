@@ -26,6 +26,7 @@
 //! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
 //! | [`preview`] | the operator at preview resolution, a plain exposure, one pixel probed | Sec. 4, Eq. 4–7 |
 //! | [`visibility`] | thresholds per pixel, differences in JNDs, tolerance map, convergence test | Eq. 4–7, Sec. 6 |
+//! | [`label`] | text labels drawn into display images (the time of a sequence's frame) | — |
 //! | [`io`] | Radiance, OpenEXR and PFM in (and 8/16-bit PNG, JPEG, TIFF photographs); PNG, JPEG, EXR, float TIFF and Radiance out | — |
 //! | `report` | the JSON reports of the CLI, Python and the viewer (feature `json`) | — |
 //!
@@ -43,6 +44,7 @@ mod error;
 pub mod glare;
 mod image;
 pub mod io;
+pub mod label;
 mod limits;
 pub mod local;
 pub mod mesopic;
@@ -63,3 +65,9 @@ pub mod visibility;
 pub use error::{Error, LimitsExceeded, Result};
 pub use image::{DisplayImage, HdrImage, Projection, View};
 pub use limits::{Limits, MAX_LUMINANCE_CD_M2, check_factor, check_luminance};
+
+/// The README's Rust examples, compiled and run as doc tests (`cargo test --doc`); its
+/// command lines are run by the CLI's `tests/readme.rs`.
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+pub struct Readme;

@@ -773,6 +773,37 @@ pub fn apply(image: &HdrImage, mapping: &Mapping) -> (DisplayImage, PixelStats) 
 /// [`apply`] writing into an existing display image, reusing its memory (for video:
 /// no allocation per frame once the buffers have the right size).
 pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -> PixelStats {
+    let (w, h) = (image.width, image.height);
+    let Some(sigma) = exact_blur_sigma(mapping, w, h) else {
+        return apply_staged(image, mapping, out);
+    };
+    let c = Coefficients::new(mapping);
+    let planes = display_planes(out, w, h, mapping.display_max_cd_m2);
+    // Mapping, blur and clipping in one pass over the rows.
+    crate::blur::exact_pass(
+        sigma,
+        w,
+        h,
+        planes,
+        false,
+        |y, _, [r, g, b]| {
+            let rows = y * w..(y + 1) * w;
+            let scotopic = image.scotopic.as_ref().map(|s| &s[rows.clone()]);
+            let xyz = [
+                &image.x[rows.clone()],
+                &image.y[rows.clone()],
+                &image.z[rows],
+            ];
+            map_chunk(&c, xyz, scotopic, r, g, b)
+        },
+        |_, [r, g, b]| clip_chunk(r, g, b),
+        PixelStats::add,
+    )
+}
+
+/// [`apply_into`] one stage after the other: the mapping pass (with the clipping when
+/// there is no blur), the blur, the clipping.
+fn apply_staged(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -> PixelStats {
     let c = Coefficients::new(mapping);
     let [r, g, b] = display_planes(out, image.width, image.height, mapping.display_max_cd_m2);
     let blur = acuity_blur(mapping, image.width, image.height);
@@ -803,7 +834,14 @@ pub(crate) fn display_planes(
     out.display_max_cd_m2 = display_max_cd_m2 as f32;
     let DisplayImage { r, g, b, .. } = out;
     [r, g, b].map(|plane| {
-        plane.resize(width * height, 0.0);
+        let n = width * height;
+        if plane.capacity() < n {
+            // Fresh zeroed memory from the allocator (pages the kernel zeroes on first
+            // touch) rather than a growth filled with zeros that are overwritten anyway.
+            *plane = vec![0.0; n];
+        } else {
+            plane.resize(n, 0.0);
+        }
         plane.as_mut_slice()
     })
 }
@@ -870,6 +908,15 @@ pub(crate) fn blur_and_clip(
     stats
 }
 
+/// The acuity sigma of a global `mapping` when its blur is the exact kernel's, which
+/// [`crate::blur::exact_pass`] runs fused with the mapping before it and the clipping
+/// after it (the same result as the separate stages, bit for bit).
+fn exact_blur_sigma(mapping: &Mapping, width: usize, height: usize) -> Option<f32> {
+    let sigma = mapping.blur_sigma_px as f32;
+    (mapping.blur_sigma_px > 0.0 && crate::blur::uses_exact_kernel(sigma, width, height))
+        .then_some(sigma)
+}
+
 /// The acuity stage of a global `mapping` (Eq. 7: one Gaussian for the whole image), or
 /// `None` when it has no blur.
 fn acuity_blur(
@@ -901,6 +948,31 @@ pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelSt
         ..
     } = image;
     assert!(r.len() == width * height && g.len() == r.len() && b.len() == r.len());
+    let display = |r, g, b| DisplayImage {
+        width,
+        height,
+        r,
+        g,
+        b,
+        display_max_cd_m2: mapping.display_max_cd_m2 as f32,
+    };
+    if let Some(sigma) = exact_blur_sigma(mapping, width, height) {
+        // Mapping, blur and clipping in one pass over the rows, in place.
+        let stats = crate::blur::exact_pass(
+            sigma,
+            width,
+            height,
+            [&mut r, &mut g, &mut b],
+            true,
+            |y, xyz, [r, g, b]| {
+                let s = scotopic.as_ref().map(|s| &s[y * width..(y + 1) * width]);
+                map_chunk(&c, xyz, s, r, g, b)
+            },
+            |_, [r, g, b]| clip_chunk(r, g, b),
+            PixelStats::add,
+        );
+        return (display(r, g, b), stats);
+    }
     let blur = acuity_blur(mapping, width, height);
     let stats = map_pass(&mut r, &mut g, &mut b, blur.is_none(), |start, r, g, b| {
         let s = scotopic.as_ref().map(|s| &s[start..start + r.len()]);
@@ -910,15 +982,7 @@ pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelSt
     });
     drop(scotopic);
     let stats = blur_and_clip(stats, &mut r, &mut g, &mut b, blur);
-    let display = DisplayImage {
-        width,
-        height,
-        r,
-        g,
-        b,
-        display_max_cd_m2: mapping.display_max_cd_m2 as f32,
-    };
-    (display, stats)
+    (display(r, g, b), stats)
 }
 
 /// Samples per parallel work item.
@@ -1074,5 +1138,74 @@ pub(crate) fn clip_chunk(r: &mut [f32], g: &mut [f32], b: &mut [f32]) -> PixelSt
     PixelStats {
         clipped: clipped as usize,
         ..PixelStats::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame with texture, a 1e6 highlight, NaN, negative and huge pixels.
+    fn scene(w: usize, h: usize, scotopic: bool) -> HdrImage {
+        let mut im = HdrImage::zeros(w, h);
+        for i in 0..w * h {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            let l = 0.02
+                + 0.1 * ((x * 0.37).sin() * (y * 0.21).cos()).abs()
+                + if (x - 20.0).abs() < 3.0 && (y - 9.0).abs() < 2.0 {
+                    1e6
+                } else {
+                    0.0
+                };
+            im.x[i] = 0.9 * l;
+            im.y[i] = l;
+            im.z[i] = 1.1 * l * (1.0 + 0.3 * (x * 0.05).sin());
+        }
+        let n = w * h;
+        im.x[(3 * w + 5) % n] = f32::NAN;
+        im.y[(7 * w + 2) % n] = -1.0;
+        im.z[n - 1] = 3e38;
+        if scotopic {
+            im.scotopic = Some(im.y.iter().map(|v| 2.0 * v.max(0.0)).collect());
+        }
+        im
+    }
+
+    /// The fused pass (mapping, exact-kernel blur and clipping in one trip through the
+    /// rows) gives the staged operator's picture and counts, bit for bit, by reference
+    /// and in place, with and without a scotopic plane, over sizes that split into
+    /// several parallel segments and sizes that do not.
+    #[test]
+    fn fused_pass_equals_the_stages() {
+        for (w, h) in [(97, 300), (1, 40), (40, 1), (5, 3), (300, 130)] {
+            for scotopic in [false, true] {
+                let im = scene(w, h, scotopic);
+                let report = plan(&im, &ViewingConditions::default()).unwrap();
+                for sigma in [0.3, 1.0, 2.19, 2.99] {
+                    let m = Mapping {
+                        blur_sigma_px: sigma,
+                        ..report.mapping
+                    };
+                    assert!(exact_blur_sigma(&m, w, h).is_some());
+                    let mut want = DisplayImage::default();
+                    let want_stats = apply_staged(&im, &m, &mut want);
+                    let mut got = DisplayImage::default();
+                    let stats = apply_into(&im, &m, &mut got);
+                    let (owned, owned_stats) = apply_owned(im.clone(), &m);
+                    assert_eq!(stats, want_stats, "{w}x{h} σ {sigma}");
+                    assert_eq!(owned_stats, want_stats, "{w}x{h} σ {sigma}");
+                    assert!(want_stats.clipped > 0 && want_stats.non_finite == 1);
+                    for (a, b, c) in [
+                        (&want.r, &got.r, &owned.r),
+                        (&want.g, &got.g, &owned.g),
+                        (&want.b, &got.b, &owned.b),
+                    ] {
+                        let bits = |v: &Vec<f32>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(a), bits(b), "{w}x{h} σ {sigma}");
+                        assert_eq!(bits(a), bits(c), "{w}x{h} σ {sigma} in place");
+                    }
+                }
+            }
+        }
     }
 }

@@ -94,6 +94,130 @@ impl Sequence {
     pub fn frame_count(&self) -> usize {
         self.times_seconds.len() + 1
     }
+
+    /// The label of frame `index` for [`crate::label::draw`]: the light level (the scene's
+    /// highest visible luminance) and the time after the switch, e.g. `"0.1 cd/m², adapted"`
+    /// for frame 0 and `"5623 cd/m², t = 75 s"` (`"t = 3.5 min"` from 2 minutes on) for
+    /// the others; `None` past the last frame.
+    ///
+    /// ```
+    /// use visadapt::sequence::Sequence;
+    /// let s = Sequence::figure_12b();
+    /// assert_eq!(s.frame_label(0).unwrap(), "1412 cd/m², adapted");
+    /// assert_eq!(s.frame_label(2).unwrap(), "0.1 cd/m², t = 20 s");
+    /// assert_eq!(s.frame_label(6).unwrap(), "0.1 cd/m², t = 3.5 min");
+    /// # Ok::<(), visadapt::Error>(())
+    /// ```
+    pub fn frame_label(&self, index: usize) -> Option<String> {
+        if index == 0 {
+            return Some(format!("{} cd/m², adapted", self.from_cd_m2));
+        }
+        let t = *self.times_seconds.get(index - 1)?;
+        let when = if t < 120.0 {
+            format!("{t} s")
+        } else {
+            let minutes = t / 60.0;
+            if minutes.fract() == 0.0 {
+                format!("{minutes} min")
+            } else {
+                format!("{minutes:.1} min")
+            }
+        };
+        Some(format!("{} cd/m², t = {when}", self.to_cd_m2))
+    }
+
+    /// How an animation of the sequence lasting about `playback_seconds` shows its frames:
+    /// in the real time of the sequence, sped up by one factor.
+    ///
+    /// Frame `i ≥ 1` (at `times_seconds[i−1]`) stays until the next frame's time, so its
+    /// delay is the time step to the next frame divided by [`Playback::speedup`]. The first
+    /// frame (the adapted state before the switch) and the last (the state the sequence
+    /// ends in, with no next time) have no time step of their own: each is held for
+    /// [`PLAYBACK_HOLD_FRACTION`] of the playback, and the frames between share the rest in
+    /// proportion to their time steps. A sequence whose times span no time (one time, or
+    /// all equal) shows every frame for the same share. No delay is shorter than
+    /// [`MIN_FRAME_DELAY_MS`] (a step that short is lengthened, and the playback with
+    /// it), and `playback_seconds` must lie in [`PLAYBACK_SECONDS_RANGE`].
+    ///
+    /// ```
+    /// use visadapt::sequence::Sequence;
+    /// // Fig. 12a: 0, 1, 4, 15, 30 and 75 s after the switch, played in 6 s.
+    /// let p = Sequence::figure_12a().playback(6.0)?;
+    /// assert_eq!(p.delays_ms, [1000, 53, 160, 587, 800, 2400, 1000]);
+    /// assert_eq!(p.speedup, Some(18.75)); // 75 s of the sequence in 4 s
+    /// # Ok::<(), visadapt::Error>(())
+    /// ```
+    pub fn playback(&self, playback_seconds: f64) -> Result<Playback> {
+        if !PLAYBACK_SECONDS_RANGE.contains(&playback_seconds) {
+            return Err(Error::invalid(
+                "playback seconds",
+                playback_seconds,
+                format!(
+                    "must be between {} and {}",
+                    PLAYBACK_SECONDS_RANGE.start(),
+                    PLAYBACK_SECONDS_RANGE.end()
+                ),
+            ));
+        }
+        check_times(&self.times_seconds)?;
+        let total_ms = 1000.0 * playback_seconds;
+        let ms = |d: f64| d.round().max(f64::from(MIN_FRAME_DELAY_MS)) as u16;
+        let t = &self.times_seconds;
+        let span = match (t.first(), t.last()) {
+            (Some(first), Some(last)) if last > first => last - first,
+            _ => {
+                let share = ms(total_ms / self.frame_count() as f64);
+                return Ok(Playback {
+                    delays_ms: vec![share; self.frame_count()],
+                    speedup: None,
+                });
+            }
+        };
+        let hold_ms = PLAYBACK_HOLD_FRACTION * total_ms;
+        // Seconds of the sequence per second of the playback between the holds.
+        let speedup = span / ((total_ms - 2.0 * hold_ms) / 1000.0);
+        let mut delays_ms = Vec::with_capacity(self.frame_count());
+        delays_ms.push(ms(hold_ms));
+        delays_ms.extend(t.windows(2).map(|w| ms(1000.0 * (w[1] - w[0]) / speedup)));
+        delays_ms.push(ms(hold_ms));
+        Ok(Playback {
+            delays_ms,
+            speedup: Some(speedup),
+        })
+    }
+}
+
+/// Share of an animation's playback for which its first frame (before the switch) and its
+/// last frame are each held (see [`Sequence::playback`]): a sixth, 1 s of the default 6 s,
+/// so that the two states the sequence goes between are seen, and two thirds of the
+/// playback is the sequence's own time. A project choice.
+pub const PLAYBACK_HOLD_FRACTION: f64 = 1.0 / 6.0;
+
+/// The shortest frame delay of an animation, ms: browsers play GIF and APNG frames of 10 ms
+/// or less at 100 ms (Chromium's and Firefox's long-standing GIF rule, applied to APNG
+/// too), so a shorter real-time step would be shown ten times too long; 20 ms is also
+/// the frame time of a 50 Hz display.
+pub const MIN_FRAME_DELAY_MS: u16 = 20;
+
+/// The playback lengths [`Sequence::playback`] accepts, seconds: up to a minute, so that
+/// a frame's delay (at most two thirds of it) fits the APNG's 16-bit milliseconds.
+pub const PLAYBACK_SECONDS_RANGE: std::ops::RangeInclusive<f64> = 0.1..=60.0;
+
+/// The frame delays of an animated [`Sequence`] ([`Sequence::playback`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Playback {
+    /// Per frame, how long it is shown, ms (one per [`Sequence::frame_count`]).
+    pub delays_ms: Vec<u16>,
+    /// Seconds of the sequence per second of playback, for the frames between the first
+    /// and the last; `None` when the times span no time.
+    pub speedup: Option<f64>,
+}
+
+impl Playback {
+    /// The length of the animation, seconds: the sum of its delays.
+    pub fn seconds(&self) -> f64 {
+        self.delays_ms.iter().map(|&d| f64::from(d)).sum::<f64>() / 1000.0
+    }
 }
 
 /// One rendered frame of a [`Sequence`].
@@ -220,6 +344,10 @@ pub fn render_owned(
     Ok(())
 }
 
+/// The most frames an [`ApngWriter`] takes: a bound on what a caller's count allocates
+/// (2^20, 16 minutes at 1000 frames per second, far beyond a sequence of states).
+pub const MAX_APNG_FRAMES: u32 = 1 << 20;
+
 /// An animated PNG (APNG) written one frame at a time, 8-bit sRGB: the file appears, complete,
 /// only when [`ApngWriter::finish`] succeeds (it is written to a temporary file beside
 /// `path` and renamed, as every output of the library).
@@ -231,6 +359,7 @@ pub struct ApngWriter {
     height: usize,
     frames: u32,
     pushed: u32,
+    delays_ms: Vec<u16>,
 }
 
 impl std::fmt::Debug for ApngWriter {
@@ -255,16 +384,44 @@ impl ApngWriter {
         frames: u32,
         delay_ms: u16,
     ) -> Result<Self> {
+        if frames > MAX_APNG_FRAMES {
+            return Err(Error::invalid(
+                "apng",
+                frames,
+                format!("frames is more than {MAX_APNG_FRAMES}"),
+            ));
+        }
+        Self::with_delays(path, width, height, &vec![delay_ms; frames as usize])
+    }
+
+    /// Start an APNG of `width × height` pixels with one frame per delay, frame `i` shown
+    /// for `delays_ms[i]` milliseconds (e.g. [`Playback::delays_ms`]), looping forever.
+    pub fn with_delays(
+        path: &Path,
+        width: usize,
+        height: usize,
+        delays_ms: &[u16],
+    ) -> Result<Self> {
         let too_big = || Error::Unsupported(format!("{width}x{height} is too large for PNG"));
         let (w, h) = (
             u32::try_from(width).map_err(|_| too_big())?,
             u32::try_from(height).map_err(|_| too_big())?,
         );
-        if frames == 0 || delay_ms == 0 || width == 0 || height == 0 {
+        let frames = u32::try_from(delays_ms.len())
+            .ok()
+            .filter(|&n| n <= MAX_APNG_FRAMES)
+            .ok_or_else(|| {
+                Error::invalid(
+                    "apng",
+                    delays_ms.len(),
+                    format!("frames is more than {MAX_APNG_FRAMES}"),
+                )
+            })?;
+        if frames == 0 || delays_ms.contains(&0) || width == 0 || height == 0 {
             return Err(Error::invalid(
                 "apng",
-                format!("{frames} frames of {width}x{height}, {delay_ms} ms"),
-                "needs at least one non-empty frame and a positive delay",
+                format!("{frames} frames of {width}x{height}, delays {delays_ms:?} ms"),
+                "needs at least one non-empty frame and positive delays",
             ));
         }
         let tmp = PendingFile::create(path)?;
@@ -275,7 +432,7 @@ impl ApngWriter {
         enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
         enc.set_compression(png::Compression::Fast);
         enc.set_animated(frames, 0).map_err(png_error)?;
-        enc.set_frame_delay(delay_ms, 1000).map_err(png_error)?;
+        enc.set_frame_delay(delays_ms[0], 1000).map_err(png_error)?;
         let writer = enc.write_header().map_err(png_error)?;
         Ok(ApngWriter {
             path: path.to_path_buf(),
@@ -285,6 +442,7 @@ impl ApngWriter {
             height,
             frames,
             pushed: 0,
+            delays_ms: delays_ms.to_vec(),
         })
     }
 
@@ -307,6 +465,9 @@ impl ApngWriter {
                 format!("is one more than the {} announced", self.frames),
             ));
         }
+        self.writer
+            .set_frame_delay(self.delays_ms[self.pushed as usize], 1000)
+            .map_err(png_error)?;
         self.writer
             .write_image_data(&to_srgb8(image))
             .map_err(png_error)?;

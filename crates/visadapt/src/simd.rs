@@ -2,8 +2,9 @@
 //!
 //! A default build targets baseline x86-64 (SSE2: four `f32` lanes, no fused multiply-add).
 //! Almost every x86-64 machine in use has AVX2 and FMA (eight lanes, one rounding per
-//! multiply-add), so the kernels are compiled twice, once for each, and the wider one is
-//! chosen at run time when the processor has it — no `-C target-cpu` needed.
+//! multiply-add), many AVX-512 (sixteen lanes), so the kernels are compiled for each, and
+//! the widest is chosen at run time when the processor has it — no `-C target-cpu`
+//! needed.
 //!
 //! The kernels are ordinary safe, generic Rust (`#[inline(always)]`, loops over small
 //! fixed-size arrays that the compiler vectorises); [`Isa::run`] compiles a closure that
@@ -22,18 +23,25 @@ pub(crate) enum Isa {
     Baseline,
     /// AVX2 with fused multiply-add (x86-64 only, when the processor has both).
     Avx2Fma,
+    /// AVX-512 (foundation) with fused multiply-add: sixteen lanes per vector (x86-64
+    /// only). The same operations as [`Isa::Avx2Fma`], so the same results bit for bit;
+    /// used by the exact-kernel blur (the recursive filter runs its AVX2 build here: its
+    /// 32 lanes are exactly the four AVX2 vectors that hide each step's latency).
+    Avx512Fma,
 }
 
 impl Isa {
     /// The level the kernels use: the best this processor supports, unless the
-    /// environment variable `VISADAPT_SIMD` is `baseline` (for comparisons; read once).
+    /// environment variable `VISADAPT_SIMD` is `baseline` or `avx2` (a cap, for
+    /// comparisons; read once).
     pub(crate) fn detect() -> Isa {
         static CHOSEN: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
         *CHOSEN.get_or_init(|| {
-            if std::env::var_os("VISADAPT_SIMD").is_some_and(|v| v == "baseline") {
-                Isa::Baseline
-            } else {
-                Isa::best()
+            let best = Isa::best();
+            match std::env::var_os("VISADAPT_SIMD") {
+                Some(v) if v == "baseline" => Isa::Baseline,
+                Some(v) if v == "avx2" && best == Isa::Avx512Fma => Isa::Avx2Fma,
+                _ => best,
             }
         })
     }
@@ -45,6 +53,9 @@ impl Isa {
             if std::arch::is_x86_feature_detected!("avx2")
                 && std::arch::is_x86_feature_detected!("fma")
             {
+                if std::arch::is_x86_feature_detected!("avx512f") {
+                    return Isa::Avx512Fma;
+                }
                 return Isa::Avx2Fma;
             }
         }
@@ -54,11 +65,11 @@ impl Isa {
     /// Every level this processor can run (for tests comparing the paths).
     #[cfg(test)]
     pub(crate) fn all_available() -> Vec<Isa> {
-        let mut v = vec![Isa::Baseline];
-        if Isa::best() == Isa::Avx2Fma {
-            v.push(Isa::Avx2Fma);
+        match Isa::best() {
+            Isa::Baseline => vec![Isa::Baseline],
+            Isa::Avx2Fma => vec![Isa::Baseline, Isa::Avx2Fma],
+            Isa::Avx512Fma => vec![Isa::Baseline, Isa::Avx2Fma, Isa::Avx512Fma],
         }
-        v
     }
 
     /// Run `f` compiled for this level. `f` should call `#[inline(always)]` kernels so
@@ -74,7 +85,7 @@ impl Isa {
                 #[cfg(target_arch = "x86_64")]
                 {
                     assert!(
-                        Isa::best() == Isa::Avx2Fma,
+                        Isa::best() != Isa::Baseline,
                         "AVX2/FMA kernels requested on a processor without them"
                     );
                     // SAFETY: `with_avx2_fma` only requires the processor to support
@@ -86,8 +97,38 @@ impl Isa {
                     unreachable!("AVX2/FMA is x86-64 only")
                 }
             }
+            Isa::Avx512Fma => {
+                #[cfg(target_arch = "x86_64")]
+                {
+                    assert!(
+                        Isa::best() == Isa::Avx512Fma,
+                        "AVX-512 kernels requested on a processor without them"
+                    );
+                    // SAFETY: `with_avx512_fma` only requires the processor to support
+                    // AVX-512F, AVX2 and FMA, which was checked on the line above.
+                    unsafe { with_avx512_fma(f) }
+                }
+                #[cfg(not(target_arch = "x86_64"))]
+                {
+                    unreachable!("AVX-512 is x86-64 only")
+                }
+            }
         }
     }
+
+    /// Whether the kernels use fused multiply-adds at this level.
+    #[cfg(test)]
+    pub(crate) fn fma(self) -> bool {
+        self != Isa::Baseline
+    }
+}
+
+/// `f` compiled with AVX-512F, AVX2 and FMA enabled (it is inlined here).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+fn with_avx512_fma<R>(f: impl FnOnce() -> R) -> R {
+    f()
 }
 
 /// `f` compiled with AVX2 and FMA enabled (it is inlined here).

@@ -1040,3 +1040,189 @@ fn dark_adaptation_frames_progress_to_the_steady_state() {
         assert!(d.last().unwrap() < &(0.05 * d[0]), "{name}: {d:?}");
     }
 }
+
+/// The delays of an APNG, ms, frame by frame (the fcTL chunk of each frame).
+fn apng_delays_ms(path: &std::path::Path) -> Vec<f64> {
+    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let mut delays = Vec::new();
+    while reader.next_frame(&mut buf).is_ok() {
+        let fc = reader.info().frame_control.unwrap();
+        delays.push(1000.0 * f64::from(fc.delay_num) / f64::from(fc.delay_den));
+    }
+    delays
+}
+
+/// The animation keeps the sequence's real time: between the held first and last frames,
+/// each frame's delay is its time step to the next frame over one speed-up, so the delays'
+/// ratios are the time steps' ratios (to the rounding of whole milliseconds: ±0.5 ms on
+/// each delay).
+#[test]
+fn playback_delays_follow_the_real_time_steps() {
+    for (seq, seconds) in [
+        (Sequence::figure_12a(), 6.0),
+        (Sequence::figure_12b(), 6.0),
+        (Sequence::figure_12b(), 20.0),
+        (
+            Sequence::new(1.0, 100.0, vec![2.0, 3.0, 10.0, 60.0, 61.0]).unwrap(),
+            3.0,
+        ),
+    ] {
+        let p = seq.playback(seconds).unwrap();
+        let t = &seq.times_seconds;
+        assert_eq!(p.delays_ms.len(), seq.frame_count());
+        let hold = 1000.0 * seconds / 6.0;
+        let (first, last) = (p.delays_ms[0], *p.delays_ms.last().unwrap());
+        assert!(
+            (f64::from(first) - hold).abs() <= 0.5 && first == last,
+            "{p:?}"
+        );
+        let speedup = (t[t.len() - 1] - t[0]) / (seconds * 2.0 / 3.0);
+        assert!((p.speedup.unwrap() / speedup - 1.0).abs() < 1e-12, "{p:?}");
+        let steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        let middle: Vec<f64> = p.delays_ms[1..p.delays_ms.len() - 1]
+            .iter()
+            .map(|&d| f64::from(d))
+            .collect();
+        assert_eq!(middle.len(), steps.len());
+        for i in 0..steps.len() {
+            // Each delay is its step over the speed-up, to half a millisecond, unless the
+            // floor lengthened it.
+            let exact = 1000.0 * steps[i] / speedup;
+            if exact >= f64::from(sequence::MIN_FRAME_DELAY_MS) {
+                assert!(
+                    (middle[i] - exact).abs() <= 0.5,
+                    "{i}: {middle:?} {steps:?}"
+                );
+            } else {
+                assert_eq!(middle[i], f64::from(sequence::MIN_FRAME_DELAY_MS));
+            }
+            for j in 0..steps.len() {
+                let floor = f64::from(sequence::MIN_FRAME_DELAY_MS);
+                if 1000.0 * steps[i.min(j)].min(steps[i.max(j)]) / speedup < floor {
+                    continue;
+                }
+                // The ratio, with the rounding of both delays as its tolerance.
+                let ratio = steps[i] / steps[j];
+                let tol = ratio * (0.5 / middle[i] + 0.5 / middle[j]) * 1.0001;
+                assert!(
+                    (middle[i] / middle[j] - ratio).abs() <= tol,
+                    "{i}/{j}: {middle:?} {steps:?}"
+                );
+            }
+        }
+        // The whole lasts the playback asked for (each delay rounded to the millisecond).
+        let total = 1000.0 * p.seconds();
+        assert!(
+            (total - 1000.0 * seconds).abs() <= 0.5 * p.delays_ms.len() as f64,
+            "{total}"
+        );
+    }
+    // Fig. 12a in 6 s: 75 s of the sequence in 4 s, 18.75 times real time; its first step
+    // (1 s) lasts 53 ms, its last (45 s) 2.4 s.
+    let p = Sequence::figure_12a().playback(6.0).unwrap();
+    assert_eq!(p.delays_ms, [1000, 53, 160, 587, 800, 2400, 1000]);
+    // A step shorter than the floor is lengthened to it (0.01 s in 150 s at 60 s).
+    let p = Sequence::new(1.0, 100.0, vec![0.0, 0.01, 150.0])
+        .unwrap()
+        .playback(6.0)
+        .unwrap();
+    assert_eq!(p.delays_ms[1], sequence::MIN_FRAME_DELAY_MS);
+    // Times that span no time: every frame the same share.
+    for times in [vec![5.0], vec![3.0, 3.0, 3.0], vec![]] {
+        let seq = Sequence::new(1.0, 100.0, times).unwrap();
+        let p = seq.playback(6.0).unwrap();
+        let share = (6000.0 / seq.frame_count() as f64).round() as u16;
+        assert!(p.delays_ms.iter().all(|&d| d == share), "{p:?}");
+        assert_eq!(p.speedup, None);
+    }
+    // Outside a minute, or not a length: refused.
+    for s in [0.0, -1.0, 0.05, 61.0, f64::NAN, f64::INFINITY] {
+        assert!(Sequence::figure_12a().playback(s).is_err(), "{s}");
+    }
+}
+
+/// An APNG with per-frame delays carries them, frame by frame.
+#[test]
+fn apng_writer_keeps_each_frames_delay() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("a.png");
+    let seq = Sequence::figure_12a();
+    let p = seq.playback(6.0).unwrap();
+    let mut apng = None;
+    sequence::render(&mixtex(), &seq, &ViewingConditions::default(), |f| {
+        let a = apng.get_or_insert_with(|| {
+            ApngWriter::with_delays(&path, f.image.width, f.image.height, &p.delays_ms).unwrap()
+        });
+        a.push(f.image)
+    })
+    .unwrap();
+    apng.unwrap().finish().unwrap();
+    let expected: Vec<f64> = p.delays_ms.iter().map(|&d| f64::from(d)).collect();
+    assert_eq!(apng_delays_ms(&path), expected);
+    // A zero delay is refused before any file exists.
+    let bad = dir.path().join("b.png");
+    assert!(ApngWriter::with_delays(&bad, 4, 4, &[100, 0]).is_err());
+    assert!(ApngWriter::with_delays(&bad, 4, 4, &[]).is_err());
+    assert!(!bad.exists());
+}
+
+/// The time label of a frame: only the pixels of its box change, the box holds white ink
+/// on black, and the glyphs of the font are distinct.
+#[test]
+fn label_changes_only_its_box() {
+    use visadapt::label;
+    let mut frames = Vec::new();
+    let seq = Sequence::figure_12b();
+    sequence::render(&mixtex(), &seq, &ViewingConditions::default(), |f| {
+        frames.push(f.image.clone());
+        Ok(())
+    })
+    .unwrap();
+    for (index, frame) in frames.iter().enumerate() {
+        let text = seq.frame_label(index).unwrap();
+        let mut labelled = frame.clone();
+        let b = label::draw(&mut labelled, &text).unwrap();
+        // The box: 5x7 glyphs on 6-pixel advances, 2 font pixels of padding, clipped.
+        let s = label::scale_for(frame.height);
+        let width = s * (6 * text.chars().count() - 1 + 4);
+        assert_eq!((b.x, b.y), (0, 0));
+        assert_eq!(b.width, width.min(frame.width), "{text}");
+        assert_eq!(b.height, (s * 11).min(frame.height));
+        let (mut ink, mut black) = (0, 0);
+        for y in 0..frame.height {
+            for x in 0..frame.width {
+                let i = y * frame.width + x;
+                let (before, after) = (
+                    [frame.r[i], frame.g[i], frame.b[i]],
+                    [labelled.r[i], labelled.g[i], labelled.b[i]],
+                );
+                if b.contains(x, y) {
+                    match after {
+                        [1.0, 1.0, 1.0] => ink += 1,
+                        [0.0, 0.0, 0.0] => black += 1,
+                        other => panic!("({x}, {y}): {other:?}"),
+                    }
+                } else {
+                    assert_eq!(before, after, "({x}, {y}) outside the box");
+                }
+            }
+        }
+        assert!(ink > 0 && black > ink, "{text}: {ink} ink, {black} black");
+    }
+    assert_eq!(seq.frame_label(7), None);
+    // Every glyph is its own; a character the font lacks is refused, the image untouched.
+    let chars: Vec<char> = "0123456789abcdefghijklmnopqrstuvwxyz.,:/=+-()²% "
+        .chars()
+        .collect();
+    for (i, a) in chars.iter().enumerate() {
+        let ga = label::glyph(*a).unwrap();
+        for b in &chars[i + 1..] {
+            assert_ne!(ga, label::glyph(*b).unwrap(), "{a} and {b}");
+        }
+    }
+    let mut image = frames[0].clone();
+    assert!(label::draw(&mut image, "t = 5 µs").is_err());
+    assert_eq!(image, frames[0]);
+}

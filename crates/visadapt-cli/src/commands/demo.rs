@@ -13,7 +13,7 @@ use std::path::Path;
 use visadapt::chart::{BLUE_PATCH, Chart, ChartOptions, RED_PATCH, Readings};
 use visadapt::io::{self, OutputFormat};
 use visadapt::operator::{self, Report, ViewingConditions};
-use visadapt::sequence::{self, ApngWriter, Sequence};
+use visadapt::sequence::{self, ApngWriter, Playback, Sequence};
 
 /// One rendered level.
 struct Panel {
@@ -83,9 +83,13 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
                 "{what}: {} to {} cd/m²",
                 seq.from_cd_m2, seq.to_cd_m2
             ));
-            render_sequence(&chart, name, seq, &args.output, &conditions, &progress)?;
+            let playback =
+                render_sequence(&chart, name, seq, &args.output, &conditions, &progress)?;
+            let pace = playback.speedup.map_or(String::new(), |x| {
+                format!(" ({}x real time)", crate::numbers::num(x))
+            });
             written.push(format!(
-                "  {what} (Fig. 12): {} -> {} cd/m², frames {name}-0.png (adapted) to {name}-{}.png at {} s, animated {name}.apng",
+                "  {what} (Fig. 12): {} -> {} cd/m², frames {name}-0.png (adapted) to {name}-{}.png at {} s, animated {name}.apng{pace}",
                 seq.from_cd_m2,
                 seq.to_cd_m2,
                 seq.times_seconds.len(),
@@ -93,7 +97,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
                     .iter()
                     .map(|t| format!("{t}"))
                     .collect::<Vec<_>>()
-                    .join(", ")
+                    .join(", "),
             ));
         }
     }
@@ -111,8 +115,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Frame delay of the demo's animated sequences, ms.
-const SEQUENCE_FRAME_MS: u16 = 700;
+/// Length of the demo's animated sequences, seconds (the real time steps sped up to it, as
+/// `sequence --apng-seconds`'s default).
+const SEQUENCE_PLAYBACK_SECONDS: f64 = 6.0;
 
 /// Render one of the paper's Fig. 12 sequences on the built-in scene: numbered PNG frames
 /// and an animated PNG, through [`visadapt::sequence::render`].
@@ -123,14 +128,14 @@ fn render_sequence(
     dir: &Path,
     conditions: &ViewingConditions,
     progress: &ProgressBar,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Playback> {
     let path = dir.join(format!("{name}.apng"));
-    let mut apng = ApngWriter::create(
+    let playback = seq.playback(SEQUENCE_PLAYBACK_SECONDS)?;
+    let mut apng = ApngWriter::with_delays(
         &path,
         chart.image.width,
         chart.image.height,
-        seq.frame_count() as u32,
-        SEQUENCE_FRAME_MS,
+        &playback.delays_ms,
     )
     .with_context(|| path.display().to_string())?;
     sequence::render(&chart.image, seq, conditions, |f| {
@@ -141,7 +146,8 @@ fn render_sequence(
         Ok(())
     })
     .with_context(|| format!("{name}: {}", dir.display()))?;
-    apng.finish().with_context(|| path.display().to_string())
+    apng.finish().with_context(|| path.display().to_string())?;
+    Ok(playback)
 }
 
 /// The panel's file name, e.g. `panel-0.04.png`.

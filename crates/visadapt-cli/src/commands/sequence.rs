@@ -6,9 +6,9 @@ use crate::cli::SequenceArgs;
 use crate::numbers::num;
 use anyhow::{Context, bail};
 use std::path::PathBuf;
-use visadapt::io;
 use visadapt::operator::ViewingConditions;
-use visadapt::sequence::{ApngWriter, Sequence, render_owned};
+use visadapt::sequence::{ApngWriter, Playback, Sequence, render_owned};
+use visadapt::{DisplayImage, io, label};
 
 /// File name of frame `index` of `count`: `frame_000.png`, zero-padded to at least 3 digits.
 pub fn frame_name(index: usize, count: usize) -> String {
@@ -20,10 +20,22 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
     let from = positive("--from", args.from)?;
     let to = positive("--to", args.to)?;
     sorted_times(&args.times)?;
-    if args.apng_delay_ms == 0 {
+    if args.apng_delay_ms == Some(0) {
         bail!("invalid --apng-delay-ms 0: must be at least 1");
     }
     let sequence = Sequence::new(from, to, args.times.clone())?;
+    let playback = match args.apng_delay_ms {
+        Some(ms) => Playback {
+            delays_ms: vec![ms; sequence.frame_count()],
+            speedup: None,
+        },
+        None => sequence.playback(args.apng_seconds).map_err(|e| match e {
+            visadapt::Error::InvalidParameter { reason, .. } => {
+                anyhow::anyhow!("invalid --apng-seconds {}: {reason}", args.apng_seconds)
+            }
+            e => e.into(),
+        })?,
+    };
     // No output may be the input, under any name: the animation, and every frame.
     let count = sequence.frame_count();
     if let Some(apng) = &args.apng {
@@ -58,14 +70,8 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
 
     let mut apng = match &args.apng {
         Some(path) => Some(
-            ApngWriter::create(
-                path,
-                scene.width,
-                scene.height,
-                count as u32,
-                args.apng_delay_ms,
-            )
-            .with_context(|| path.display().to_string())?,
+            ApngWriter::with_delays(path, scene.width, scene.height, &playback.delays_ms)
+                .with_context(|| path.display().to_string())?,
         ),
         None => None,
     };
@@ -74,12 +80,22 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
     let mut white: Option<(String, Option<String>)> = None;
     // The file an error happened on, to name it in the message.
     let mut failed: Option<PathBuf> = None;
+    // With --label-time, the frame is labelled in a copy (the sequence reuses its image).
+    let mut labelled = DisplayImage::default();
     let result = render_owned(scene, &sequence, &conditions, |frame| {
         let path = args.output.join(frame_name(frame.index, count));
-        io::write_display(frame.image, &path, io::OutputFormat::Png { bits: 8 })
+        let image = match sequence.frame_label(frame.index) {
+            Some(text) if args.label_time => {
+                labelled.clone_from(frame.image);
+                label::draw(&mut labelled, &text)?;
+                &labelled
+            }
+            _ => frame.image,
+        };
+        io::write_display(image, &path, io::OutputFormat::Png { bits: 8 })
             .inspect_err(|_| failed = Some(path.clone()))?;
         if let (Some(a), Some(apng_path)) = (apng.as_mut(), &args.apng) {
-            a.push(frame.image)
+            a.push(image)
                 .inspect_err(|_| failed = Some(apng_path.clone()))?;
         }
         white.get_or_insert_with(|| {
@@ -117,6 +133,8 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
             "frames": frames,
             "scene_white": white.as_ref().and_then(|w| w.1.clone()),
             "apng": args.apng.as_ref().map(|p| p.display().to_string()),
+            "apng_delays_ms": args.apng.as_ref().map(|_| &playback.delays_ms),
+            "apng_speedup": args.apng.as_ref().and(playback.speedup),
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
@@ -141,7 +159,20 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
             );
         }
         if let Some(p) = &args.apng {
-            println!("animation: {}", p.display());
+            let pace = match playback.speedup {
+                Some(x) => format!(
+                    "the real time steps {} times faster, first and last frames held {} s",
+                    num(x),
+                    num(f64::from(playback.delays_ms[0]) / 1000.0)
+                ),
+                None => "every frame for the same time".to_string(),
+            };
+            println!(
+                "animation: {} ({} frames in {} s: {pace})",
+                p.display(),
+                count,
+                num(playback.seconds())
+            );
         }
     }
     Ok(())

@@ -75,17 +75,24 @@ pub(crate) fn half_kernel(sigma: f64) -> Vec<f32> {
     k[k.len() / 2..].to_vec()
 }
 
-/// Samples computed together: four AVX2 vectors (eight SSE2 ones), independent
+/// Samples computed together by the baseline build (SSE2): eight vectors, independent
 /// accumulators so that the multiply-add latency is hidden; [`NARROW`] for the rest.
-const WIDE: usize = 32;
-/// The narrower block for what is left after the [`WIDE`] ones: one AVX2 vector.
+pub(crate) const LANES_BASELINE: usize = 32;
+/// Samples computed together by the AVX2 build: eight vectors of eight. Each tap adds
+/// to every accumulator, so a block needs as many vectors as the multiply-add's latency
+/// times its throughput (4 × 2 on current x86-64 cores) to keep the units busy: four
+/// vectors (32 samples) ran at half the rate.
+pub(crate) const LANES_AVX2: usize = 64;
+/// Samples computed together by the AVX-512 build: eight vectors of sixteen.
+pub(crate) const LANES_AVX512: usize = 128;
+/// The narrower block for what is left after the wide ones: one AVX2 vector.
 const NARROW: usize = 8;
 
 /// One output sample: `h[0]·x(0) + Σ_j h[j]·(x(−j) + x(j))`, the same operations in the
 /// same order for rows and columns and for every block width, so that all round
 /// identically.
 #[inline(always)]
-fn tap_sum<const FMA: bool>(half: &[f32], x: impl Fn(isize) -> f32) -> f32 {
+pub(super) fn tap_sum<const FMA: bool>(half: &[f32], x: impl Fn(isize) -> f32) -> f32 {
     let mut acc = half[0] * x(0);
     for (j, &h) in half.iter().enumerate().skip(1) {
         let j = j as isize;
@@ -119,9 +126,9 @@ fn lanes_at<const N: usize>(v: &[f32], at: usize) -> &[f32; N] {
 }
 
 /// Compute `out[i]` for all `i` from `x(i, d)`, the input at offset `d` from output `i`,
-/// in blocks of [`WIDE`], then [`NARROW`], then one.
+/// in blocks of `L`, then [`NARROW`], then one (the same result for any `L`).
 #[inline(always)]
-fn convolve<const FMA: bool>(
+fn convolve<const FMA: bool, const L: usize>(
     half: &[f32],
     out: &mut [f32],
     block: impl Fn(usize, isize) -> usize,
@@ -129,10 +136,10 @@ fn convolve<const FMA: bool>(
 ) {
     let n = out.len();
     let mut i = 0;
-    while i + WIDE <= n {
-        let acc = tap_sum_lanes::<FMA, WIDE>(half, |d| lanes_at(src, block(i, d)));
-        out[i..i + WIDE].copy_from_slice(&acc);
-        i += WIDE;
+    while i + L <= n {
+        let acc = tap_sum_lanes::<FMA, L>(half, |d| lanes_at(src, block(i, d)));
+        out[i..i + L].copy_from_slice(&acc);
+        i += L;
     }
     while i + NARROW <= n {
         let acc = tap_sum_lanes::<FMA, NARROW>(half, |d| lanes_at(src, block(i, d)));
@@ -144,59 +151,153 @@ fn convolve<const FMA: bool>(
     }
 }
 
-/// Convolve one row with the kernel whose centre-outwards taps are `half` (replicate
-/// boundary), using `pad` as scratch.
-#[inline(always)]
-pub(crate) fn row<const FMA: bool>(half: &[f32], row: &mut [f32], pad: &mut Vec<f32>) {
-    let r = half.len() - 1;
-    let n = row.len();
-    let (Some(&first), Some(&last)) = (row.first(), row.last()) else {
-        return;
-    };
-    pad.clear();
-    pad.resize(r, first);
-    pad.extend_from_slice(row);
-    pad.resize(n + 2 * r, last);
-    convolve::<FMA>(half, row, |i, d| (i + r).wrapping_add_signed(d), pad);
+/// One segment of rows of an [exact pass](super::exact_pass): the rows it writes and,
+/// in place, the input rows beyond them that other segments overwrite, saved before the
+/// pass.
+pub(crate) struct Segment<'a, const P: usize> {
+    /// Index of the segment's first row.
+    pub(crate) start: usize,
+    /// The segment's rows of every plane (the output; in place, also the input).
+    pub(crate) rows: [&'a mut [f32]; P],
+    /// In place: the input rows above the segment that its kernel reaches, from row
+    /// `above.0`, per plane (empty otherwise).
+    pub(crate) above: (usize, [Vec<f32>; P]),
+    /// In place: the input rows below the segment that its kernel reaches, per plane.
+    pub(crate) below: [Vec<f32>; P],
 }
 
-/// Copy a strip of row segments (all of the same width) into `scratch` as
-/// `segs.len() + 2r` contiguous rows, the first and last replicated `r` times.
-pub(crate) fn fill_strip(segs: &[&mut [f32]], r: usize, scratch: &mut Vec<f32>) {
-    scratch.clear();
-    let (Some(first), Some(last)) = (segs.first(), segs.last()) else {
-        return;
-    };
-    for _ in 0..r {
-        scratch.extend_from_slice(first);
-    }
-    for s in segs {
-        scratch.extend_from_slice(s);
-    }
-    for _ in 0..r {
-        scratch.extend_from_slice(last);
-    }
-}
-
-/// Convolve a strip of columns vertically: `scratch` is the strip as [`fill_strip`]
-/// left it, the output rows are written to `segs`.
+/// Run one segment of an exact pass: every input row its outputs need (the segment's
+/// rows and `r` beyond each end, the boundary replicated) is produced by
+/// `fill(y, prior, rows)` into the middle of a padded row and convolved along the row
+/// into a ring of `2r + 1` rows; each output row is then the convolution down the ring,
+/// written to the segment's rows and handed to `finish`. `prior` is row `y`'s content
+/// before the pass when `in_place`, empty slices otherwise. Returns the sum (`add`) of
+/// what `fill` returned for the segment's own rows and of what `finish` returned.
+///
+/// Each output sample goes through the same operations in the same order as in a
+/// separate row pass and column pass ([`convolve`] along the row, then down the
+/// column), so the result does not depend on how the rows are split into segments.
+/// A plane one sample wide (or high) is not filtered along that axis (it is constant
+/// along it).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn column_strip<const FMA: bool>(
+pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
     half: &[f32],
-    scratch: &[f32],
-    segs: &mut [&mut [f32]],
-) {
+    width: usize,
+    height: usize,
+    in_place: bool,
+    mut seg: Segment<'_, P>,
+    fill: &impl Fn(usize, [&[f32]; P], [&mut [f32]; P]) -> S,
+    finish: &impl Fn(usize, [&mut [f32]; P]) -> S,
+    add: &impl Fn(S, S) -> S,
+    mut acc: S,
+) -> S {
     let r = half.len() - 1;
-    let Some(sw) = segs.first().map(|s| s.len()) else {
-        return;
-    };
-    for (y, seg) in segs.iter_mut().enumerate() {
-        convolve::<FMA>(
-            half,
-            seg,
-            |x, d| (y + r).wrapping_add_signed(d) * sw + x,
-            scratch,
-        );
+    let n = 2 * r + 1;
+    let w = width;
+    let padded = w + 2 * r;
+    let a = seg.start;
+    let b = a + seg.rows[0].len() / w;
+    let mut scratch = Scratch::take();
+    // Ring rows start on cache-line boundaries: the column pass then reads whole lines
+    // (a vector load across two lines costs two).
+    let stride = w.next_multiple_of(ALIGN);
+    let (ring, pad) = scratch.split(P * n * stride, P * padded);
+    let mut offsets = vec![0usize; n];
+    let mut next = a.saturating_sub(r);
+    for o in a..b {
+        while next <= (o + r).min(height - 1) {
+            let y = next;
+            next += 1;
+            let prior: [&[f32]; P] = std::array::from_fn(|p| {
+                if !in_place {
+                    &[][..]
+                } else if y < a {
+                    &seg.above.1[p][(y - seg.above.0) * w..][..w]
+                } else if y >= b {
+                    &seg.below[p][(y - b) * w..][..w]
+                } else {
+                    &seg.rows[p][(y - a) * w..][..w]
+                }
+            });
+            let mut parts = pad.chunks_exact_mut(padded);
+            let rows: [&mut [f32]; P] = std::array::from_fn(|_| {
+                let part = parts.next().expect("P padded rows");
+                &mut part[r..r + w]
+            });
+            let s = fill(y, prior, rows);
+            if (a..b).contains(&y) {
+                acc = add(acc, s);
+            }
+            let slot = y % n;
+            for (p, row) in pad.chunks_exact_mut(padded).enumerate() {
+                let dst = &mut ring[(p * n + slot) * stride..][..w];
+                if w > 1 {
+                    let (first, last) = (row[r], row[r + w - 1]);
+                    row[..r].fill(first);
+                    row[r + w..].fill(last);
+                    convolve::<FMA, L>(half, dst, |i, d| (i + r).wrapping_add_signed(d), row);
+                } else {
+                    dst.copy_from_slice(&row[r..r + w]);
+                }
+            }
+        }
+        for (j, off) in offsets.iter_mut().enumerate() {
+            *off = ((o + j).saturating_sub(r).min(height - 1) % n) * stride;
+        }
+        let mut out: [&mut [f32]; P] = seg.rows.each_mut().map(|p| &mut p[(o - a) * w..][..w]);
+        for (p, row) in out.iter_mut().enumerate() {
+            let base = p * n * stride;
+            if height > 1 {
+                convolve::<FMA, L>(
+                    half,
+                    row,
+                    |x, d| base + offsets[(d + r as isize) as usize] + x,
+                    ring,
+                );
+            } else {
+                row.copy_from_slice(&ring[base + offsets[r]..][..w]);
+            }
+        }
+        acc = add(acc, finish(o, out));
+    }
+    scratch.give_back();
+    acc
+}
+
+/// The ring and padded rows of a segment, kept by each thread from one pass to the next
+/// (fresh memory for every pass costs page faults: about 1 MiB per 1080p frame).
+struct Scratch(Vec<f32>);
+
+/// Samples per cache line (64 bytes).
+const ALIGN: usize = 16;
+
+/// Scratch larger than this (in samples, 16 MiB) is freed after its pass, not kept.
+const SCRATCH_KEEP_MAX: usize = 1 << 22;
+
+thread_local! {
+    static SCRATCH: std::cell::Cell<Vec<f32>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
+impl Scratch {
+    fn take() -> Self {
+        Scratch(SCRATCH.with(std::cell::Cell::take))
+    }
+
+    /// Two buffers of `a` and `b` samples (their content is left from earlier use), the
+    /// first starting on a multiple of [`ALIGN`] samples in memory.
+    fn split(&mut self, a: usize, b: usize) -> (&mut [f32], &mut [f32]) {
+        self.0.resize(a + b + ALIGN, 0.0);
+        let misalign = (self.0.as_ptr() as usize / size_of::<f32>()) % ALIGN;
+        let skip = (ALIGN - misalign) % ALIGN;
+        let (a_buf, b_buf) = self.0[skip..].split_at_mut(a);
+        (a_buf, &mut b_buf[..b])
+    }
+
+    fn give_back(self) {
+        if self.0.len() <= SCRATCH_KEEP_MAX {
+            SCRATCH.with(|s| s.set(self.0));
+        }
     }
 }
 

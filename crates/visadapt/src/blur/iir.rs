@@ -741,7 +741,7 @@ mod tests {
                         .iter()
                         .map(|&v| std::array::from_fn(|l| (v * (1.0 + l as f64)) as f32))
                         .collect();
-                    let fma = isa == crate::simd::Isa::Avx2Fma;
+                    let fma = isa.fma();
                     isa.run(|| match (prec, fma) {
                         (Precision::F32, true) => filter_rows::<f32, true, _>(&d, &mut rows),
                         (Precision::F32, false) => filter_rows::<f32, false, _>(&d, &mut rows),
