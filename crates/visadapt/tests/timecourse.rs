@@ -863,8 +863,8 @@ fn local_time_course_follows_eq_8_9_at_each_pixels_level() {
     let las: Vec<f32> = la.iter().map(|&l| (f64::from(l) * SP) as f32).collect();
     let map = AdaptationMap::from_levels(w, h, &la, &las).unwrap();
     let mut image = HdrImage::zeros(w, h);
-    for i in 0..w * h {
-        let l = la[i] * if i < w { 1.0 } else { 0.5 };
+    for (i, &a) in la.iter().enumerate() {
+        let l = a * if i < w { 1.0 } else { 0.5 };
         image.x[i] = 0.9505 * l;
         image.y[i] = l;
         image.z[i] = 1.089 * l;
@@ -889,7 +889,7 @@ fn local_time_course_follows_eq_8_9_at_each_pixels_level() {
     let steady = show(&LocalMapping::steady_state(&map, &report, true));
     let lda = report.display_adaptation_cd_m2;
     let mut gain = Vec::new();
-    for region in 0..2 {
+    for (region, &level) in levels.iter().enumerate() {
         let (adapted, half) = (region * 3, w + region * 3);
         // (a) Eq. 9: the pixel's own level, as in the steady state.
         let rel = f64::from(now[adapted] / steady[adapted] - 1.0).abs();
@@ -908,7 +908,7 @@ fn local_time_course_follows_eq_8_9_at_each_pixels_level() {
             "region {region}: contrast ×{ratio}, 10^-E = {}",
             10f64.powf(-excess)
         );
-        gain.push(c_steady / (0.5 * f64::from(levels[region])));
+        gain.push(c_steady / (0.5 * f64::from(level)));
     }
     // (c) Steady contrast gains (display per cd/m²) as Eq. 3 at each region's own level.
     let want = photopic_scale(100.0, lda) / photopic_scale(1000.0, lda);
