@@ -15,7 +15,9 @@
 //! zero. The quantile is exact, computed in O(n). When the fraction leaves at most
 //! [`TOP_K_MAX`] samples above it (the usual case: 2074 at 1080p by default), in one pass
 //! that keeps only the brightest samples seen (a buffer compacted by selection whenever it
-//! fills, whose threshold then rises); otherwise with a histogram on the f32 bit pattern
+//! fills, whose threshold then rises), starting from a threshold guessed from a sample of
+//! the pixels and checked (searched again from 0 when fewer samples lie above it than
+//! the answer needs); otherwise with a histogram on the f32 bit pattern
 //! refined by a second pass inside the one bin that holds it.
 
 /// Default fraction of pixels allowed to be brighter than the "highest visible" luminance.
@@ -144,10 +146,11 @@ struct Brightest {
 }
 
 impl Brightest {
-    fn new(keep: usize) -> Self {
+    /// Keeping the `keep` brightest keys above `floor`.
+    fn new(keep: usize, floor: u32) -> Self {
         Brightest {
             keep,
-            floor: 0,
+            floor,
             keys: Vec::with_capacity(2 * keep.max(BLOCK)),
         }
     }
@@ -183,15 +186,55 @@ impl Brightest {
         self
     }
 
-    /// The `keep`-th largest sample (0 if fewer than `keep` are positive).
-    fn answer(mut self) -> f32 {
+    /// The `keep`-th largest sample, `None` if fewer than `keep` are above the floor
+    /// the search started from.
+    fn answer(mut self) -> Option<f32> {
         self.cut();
-        if self.keys.len() < self.keep {
-            0.0
-        } else {
-            f32::from_bits(*self.keys.iter().min().expect("keep ≥ 1"))
+        (self.keys.len() >= self.keep)
+            .then(|| f32::from_bits(*self.keys.iter().min().expect("keep ≥ 1")))
+    }
+}
+
+/// Pixels per sampled run of [`floor_guess`], and the distance between runs.
+const GUESS_RUN: usize = 16;
+const GUESS_STRIDE: usize = 1024;
+/// [`floor_guess`] aims at this many times `keep` samples above its guess.
+const GUESS_MARGIN: usize = 4;
+/// Fewest sampled keys above the guess for it to be made (fewer: no guess).
+const GUESS_MIN_ABOVE: usize = 32;
+
+/// A floor below which the `keep`-th largest key of each channel very probably lies,
+/// from a sample of one run of pixels in every [`GUESS_STRIDE`]: the sample's key with
+/// about [`GUESS_MARGIN`]` · keep` keys of the whole image above it, scaled. Starting the
+/// one-pass search from it, only the few keys above it are kept (on a frame whose
+/// brightness grows down the rows almost every key raised the running floor and paid for
+/// it); [`top_k`] checks that at least `keep` keys were above it and otherwise searches
+/// again from 0, so the answer stays exact. 0 (no guess) when the sample is too small.
+fn floor_guess<const K: usize>(
+    n: usize,
+    fill: &impl Fn(usize, &mut [[f32; K]]),
+    keep: usize,
+) -> [u32; K] {
+    let mut sample: [Vec<u32>; K] = std::array::from_fn(|_| Vec::new());
+    let mut block = [[0.0f32; K]; GUESS_RUN];
+    let mut keys = [[0u32; K]; GUESS_RUN];
+    for start in (0..n).step_by(GUESS_STRIDE) {
+        let len = GUESS_RUN.min(n - start);
+        fill(start, &mut block[..len]);
+        block_keys(&block[..len], &mut keys[..len]);
+        for px in &keys[..len] {
+            for k in 0..K {
+                sample[k].push(px[k]);
+            }
         }
     }
+    let m = sample[0].len();
+    // The sample's j-th largest key has about j·n/m keys of the image above it.
+    let above = (GUESS_MARGIN * keep).saturating_mul(m) / n.max(1);
+    if above < GUESS_MIN_ABOVE || above >= m {
+        return [0; K];
+    }
+    sample.map(|mut s| *s.select_nth_unstable(m - 1 - above).1)
 }
 
 /// The one-pass quantile: the `keep`-th largest sample of each channel.
@@ -200,9 +243,26 @@ fn top_k<const K: usize>(
     fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
     keep: usize,
 ) -> [f32; K] {
+    let guess = floor_guess::<K>(n, fill, keep);
+    if let Some(found) = top_k_above(n, fill, keep, guess) {
+        return found;
+    }
+    // Fewer than `keep` keys above the guess: search again from 0.
+    top_k_above(n, fill, keep, [0; K]).expect("from floor 0 every channel has an answer")
+}
+
+/// [`top_k`] from the floors `floor`, `None` if a channel had fewer than `keep` keys
+/// above its floor (with floor 0 that means fewer than `keep` positive samples: the
+/// answer is then 0).
+fn top_k_above<const K: usize>(
+    n: usize,
+    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
+    keep: usize,
+    floor: [u32; K],
+) -> Option<[f32; K]> {
     let top = fold_chunks(
         n,
-        || std::array::from_fn::<_, K, _>(|_| Brightest::new(keep)),
+        || std::array::from_fn::<_, K, _>(|k| Brightest::new(keep, floor[k])),
         |range, top| {
             for_each_key(range, fill, |px| {
                 for k in 0..K {
@@ -215,7 +275,15 @@ fn top_k<const K: usize>(
             a.map(|a| a.merge(b.next().expect("K channels")))
         },
     );
-    top.map(Brightest::answer)
+    let mut found = [0.0; K];
+    for (k, (top, f)) in top.into_iter().zip(&mut found).enumerate() {
+        match top.answer() {
+            Some(v) => *f = v,
+            None if floor[k] == 0 => *f = 0.0,
+            None => return None,
+        }
+    }
+    Some(found)
 }
 
 /// Histograms of the high 16 bits of each channel.
@@ -394,6 +462,63 @@ mod tests {
                 assert_eq!(highest_visible(v, fraction).to_bits(), two[0].to_bits());
             }
         }
+    }
+
+    /// The floor guessed from a sample is checked: on frames whose sampled pixels are
+    /// the brightest (the guess too high: a second search) or the darkest (the guess
+    /// far too low), and on a frame brightening down its rows, the one-pass answer is
+    /// the histogram's, exactly.
+    #[test]
+    fn guessed_floor_keeps_the_answer_exact() {
+        let n = 2 * CHUNK + 777;
+        let sampled = |i: usize| i % GUESS_STRIDE < GUESS_RUN;
+        let bright_sampled: Vec<f32> = (0..n)
+            .map(|i| {
+                if sampled(i) {
+                    5.0
+                } else {
+                    (i % 997) as f32 * 1e-3
+                }
+            })
+            .collect();
+        let dark_sampled: Vec<f32> = (0..n)
+            .map(|i| {
+                if sampled(i) {
+                    0.0
+                } else {
+                    1.0 + (i % 991) as f32
+                }
+            })
+            .collect();
+        let brightening: Vec<f32> = (0..n).map(|i| (i / 1920) as f32 * (i % 7) as f32).collect();
+        for v in [&bright_sampled, &dark_sampled, &brightening] {
+            let fill = |start: usize, out: &mut [[f32; 1]]| {
+                for (o, x) in out.iter_mut().zip(&v[start..]) {
+                    *o = [*x];
+                }
+            };
+            for fraction in [1e-4, 1e-3, 0.01] {
+                let allowed = ((n as f64) * fraction).floor() as usize;
+                let rank = n - 1 - allowed;
+                // The brightening frame is searched from a guess (the others need not be).
+                if std::ptr::eq(v, &brightening) && fraction >= 1e-3 {
+                    assert_ne!(floor_guess::<1>(n, &fill, n - rank), [0]);
+                }
+                let one = top_k::<1>(n, &fill, n - rank);
+                let two = by_histogram::<1>(n, &fill, rank);
+                assert_eq!(one[0].to_bits(), two[0].to_bits(), "fraction {fraction}");
+            }
+        }
+        let fill = |start: usize, out: &mut [[f32; 1]]| {
+            for (o, x) in out.iter_mut().zip(&bright_sampled[start..]) {
+                *o = [*x];
+            }
+        };
+        // Here the guess is 5.0 itself: no key above it, so the second search ran.
+        let keep = n / 1000;
+        assert_eq!(floor_guess::<1>(n, &fill, keep), [5.0f32.to_bits()]);
+        assert_eq!(top_k_above::<1>(n, &fill, keep, [5.0f32.to_bits()]), None);
+        assert_eq!(top_k::<1>(n, &fill, keep), [5.0]);
     }
 
     #[test]

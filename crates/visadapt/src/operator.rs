@@ -50,6 +50,7 @@ use crate::local::{self, AdaptationMap, LocalAdaptation, LocalMapping, LocalRepo
 use crate::mesopic::rod_weight;
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
+use crate::simd::Isa;
 use crate::timecourse::Undershoot;
 use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
 use crate::{DisplayImage, Error, HdrImage, Result, View};
@@ -779,6 +780,7 @@ pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -
     };
     let c = Coefficients::new(mapping);
     let planes = display_planes(out, w, h, mapping.display_max_cd_m2);
+    let isa = Isa::detect();
     // Mapping, blur and clipping in one pass over the rows.
     crate::blur::exact_pass(
         sigma,
@@ -794,7 +796,7 @@ pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -
                 &image.y[rows.clone()],
                 &image.z[rows],
             ];
-            map_chunk(&c, xyz, scotopic, r, g, b)
+            map_row(isa, &c, xyz, scotopic, [r, g, b])
         },
         |_, [r, g, b]| clip_chunk(r, g, b),
         PixelStats::add,
@@ -950,6 +952,7 @@ pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelSt
     };
     if let Some(sigma) = exact_blur_sigma(mapping, width, height) {
         // Mapping, blur and clipping in one pass over the rows, in place.
+        let isa = Isa::detect();
         let stats = crate::blur::exact_pass(
             sigma,
             width,
@@ -958,7 +961,7 @@ pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelSt
             true,
             |y, xyz, [r, g, b]| {
                 let s = scotopic.as_ref().map(|s| &s[y * width..(y + 1) * width]);
-                map_chunk(&c, xyz, s, r, g, b)
+                map_row(isa, &c, xyz, s, [r, g, b])
             },
             |_, [r, g, b]| clip_chunk(r, g, b),
             PixelStats::add,
@@ -1005,6 +1008,24 @@ pub(crate) fn par_chunks(
             .enumerate()
             .map(|(i, ((r, g), b))| f(i * CHUNK, r, g, b))
             .fold(PixelStats::default(), add)
+    }
+}
+
+/// [`map_chunk`] compiled for the instruction set `isa` (the same result on every one:
+/// it has no multiply-add to fuse), for the rows of the fused pass, whose closures the
+/// compiler does not inline into the blur's own target-feature functions.
+#[inline(always)]
+fn map_row(
+    isa: Isa,
+    c: &Coefficients,
+    xyz: [&[f32]; 3],
+    scotopic: Option<&[f32]>,
+    [r, g, b]: [&mut [f32]; 3],
+) -> PixelStats {
+    match isa {
+        Isa::Avx512Fma => Isa::Avx512Fma.run(|| map_chunk(c, xyz, scotopic, r, g, b)),
+        Isa::Avx2Fma => Isa::Avx2Fma.run(|| map_chunk(c, xyz, scotopic, r, g, b)),
+        Isa::Baseline => map_chunk(c, xyz, scotopic, r, g, b),
     }
 }
 
