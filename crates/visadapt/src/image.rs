@@ -133,6 +133,21 @@ impl HdrImage {
         Ok(self)
     }
 
+    /// The X, Y, Z planes and the scotopic plane, taken out of the image, for the stages
+    /// that write their result over the input's own planes ([`operator::apply_owned`],
+    /// [`local::apply_owned`]).
+    ///
+    /// # Panics
+    /// If the planes are inconsistent ([`HdrImage::check_consistent`]).
+    ///
+    /// [`operator::apply_owned`]: crate::operator::apply_owned
+    /// [`local::apply_owned`]: crate::local::apply_owned
+    pub(crate) fn into_planes(self) -> ([Vec<f32>; 3], Option<Vec<f32>>) {
+        self.check_consistent()
+            .expect("an image with consistent planes");
+        ([self.x, self.y, self.z], self.scotopic)
+    }
+
     /// Check that every plane has `width × height` samples.
     pub fn check_consistent(&self) -> crate::Result<()> {
         let n = self.len();

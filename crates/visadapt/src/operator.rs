@@ -940,16 +940,8 @@ fn acuity_blur(
 /// As [`apply`].
 pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelStats) {
     let c = Coefficients::new(mapping);
-    let HdrImage {
-        width,
-        height,
-        x: mut r,
-        y: mut g,
-        z: mut b,
-        scotopic,
-        ..
-    } = image;
-    assert!(r.len() == width * height && g.len() == r.len() && b.len() == r.len());
+    let (width, height) = (image.width, image.height);
+    let ([mut r, mut g, mut b], scotopic) = image.into_planes();
     let display = |r, g, b| DisplayImage {
         width,
         height,

@@ -103,6 +103,7 @@ use crate::operator::{self, MIN_BLUR_SIGMA_PX, Report, ViewingConditions};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
 use crate::tvi::{cone_threshold_cd_m2, rod_threshold_scotopic_cd_m2};
 use crate::{Error, HdrImage, Result};
+use std::borrow::Cow;
 
 /// Exponent `β` of the probability summation of the rod and cone signals: the slope of a
 /// Weibull psychometric function for contrast detection. 3.5 is the value of Daly's Visible
@@ -366,7 +367,7 @@ impl Viewer<'static> {
                 "needs its adaptation map: use Observation::for_image",
             ));
         }
-        let (_, report) = operator::prepare(image, conditions)?;
+        let report = Observation::for_image(image, conditions)?.report;
         Ok((Viewer::from_report(&report), report))
     }
 
@@ -448,6 +449,15 @@ impl Observation {
     /// globally or locally, acuity from the view; with glare, of the veiled retinal image,
     /// as [`operator::prepare`] makes it).
     pub fn for_image(image: &HdrImage, conditions: &ViewingConditions) -> Result<Self> {
+        Ok(Observation::with_retina(image, conditions)?.1)
+    }
+
+    /// [`Observation::for_image`] with the retinal image it observed (the image itself
+    /// without glare, its veiled copy with it).
+    fn with_retina<'a>(
+        image: &'a HdrImage,
+        conditions: &ViewingConditions,
+    ) -> Result<(Cow<'a, HdrImage>, Self)> {
         let (retina, mut report) = operator::prepare(image, conditions)?;
         let map = match conditions.adaptation {
             operator::AdaptationMode::Global => None,
@@ -457,7 +467,7 @@ impl Observation {
                 Some(map)
             }
         };
-        Ok(Observation { report, map })
+        Ok((retina, Observation { report, map }))
     }
 
     /// The viewer: per pixel with a map, else the report's global state.
@@ -482,12 +492,12 @@ pub fn compare(
     test: &HdrImage,
     conditions: &ViewingConditions,
 ) -> Result<(Difference, Report)> {
-    let observation = Observation::for_image(reference, conditions)?;
+    // The reference's retinal image is the one its observer was made from (veiled once).
+    let (retina, observation) = Observation::with_retina(reference, conditions)?;
     let viewer = observation.viewer();
     let d = if conditions.glare.is_some() {
-        let (r, _) = operator::prepare(reference, conditions)?;
         let (t, _) = operator::prepare(test, conditions)?;
-        difference(&r, &t, &viewer)?
+        difference(&retina, &t, &viewer)?
     } else {
         difference(reference, test, &viewer)?
     };

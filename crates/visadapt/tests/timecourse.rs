@@ -837,6 +837,88 @@ fn bakers_dip_does_not_crush_shadows_with_local_adaptation() {
     assert!(frames[0].1 > frames[1].1 + 0.001);
 }
 
+/// The local time course pixel by pixel, against Eq. 3 and Eq. 8-9 computed here (the
+/// test above only counts black pixels: a time course that ignored the local offsets, or
+/// applied the excess to some pixels only, passed it).
+#[test]
+fn local_time_course_follows_eq_8_9_at_each_pixels_level() {
+    // Each pixel's mapping, against Eq. 3 and Eq. 8-9 computed here: two regions adapted
+    // locally to 1000 and 100 cd/m² (a map of given levels, photopic: k = 0), the state of
+    // an observer 30 s after 2000 → 200 cd/m² (its cone threshold still raised by a log
+    // excess E > 0). Per pixel the display of a luminance L is m_∞(L_a)·L_a + m(t)·(L − L_a)
+    // with m_∞ = Eq. 3 at the pixel's own L_a and m(t) = m_∞·10^(−E): so (a) a pixel's
+    // own adaptation level is shown as in the steady state (Eq. 9), (b) contrast about it
+    // is scaled by 10^(−E) in both regions alike (one state for the whole field), and (c)
+    // the two regions' steady contrast gains stand as Eq. 3 at their own levels.
+    use visadapt::local::{AdaptationMap, LocalMapping};
+    use visadapt::mesopic::rod_weight;
+    use visadapt::scale::photopic_scale;
+    let levels = [1000.0f32, 100.0];
+    for l in levels {
+        assert_eq!(rod_weight(f64::from(l) * SP), 0.0, "{l}: photopic");
+    }
+    // Columns 0-2 at the first level, 3-5 at the second; rows: L = L_a, L_a/2.
+    let (w, h) = (6, 2);
+    let la: Vec<f32> = (0..w * h).map(|i| levels[(i % w) / 3]).collect();
+    let las: Vec<f32> = la.iter().map(|&l| (f64::from(l) * SP) as f32).collect();
+    let map = AdaptationMap::from_levels(w, h, &la, &las).unwrap();
+    let mut image = HdrImage::zeros(w, h);
+    for (i, &a) in la.iter().enumerate() {
+        let l = a * if i < w { 1.0 } else { 0.5 };
+        image.x[i] = 0.9505 * l;
+        image.y[i] = l;
+        image.z[i] = 1.089 * l;
+    }
+    image.absolute_units = true;
+    let plain = ViewingConditions {
+        acuity: false,
+        ..ViewingConditions::default()
+    };
+    let report = operator::plan(&image, &plain).unwrap();
+    let ee = |l: f64| (l, l * SP);
+    let state = at(ee(2000.0), ee(200.0), 30.0);
+    let excess = state.mapping_cone_excess_log();
+    assert!(excess > 0.05, "E = {excess}");
+    let show = |mapping: &LocalMapping| {
+        let mut out = visadapt::DisplayImage::default();
+        let stats = visadapt::local::apply_into(&image, &map, mapping, &mut out);
+        assert_eq!(stats.clipped, 0);
+        out.g
+    };
+    let now = show(&LocalMapping::for_time_course(&map, &state, &report, true));
+    let steady = show(&LocalMapping::steady_state(&map, &report, true));
+    let lda = report.display_adaptation_cd_m2;
+    let mut gain = Vec::new();
+    for (region, &level) in levels.iter().enumerate() {
+        let (adapted, half) = (region * 3, w + region * 3);
+        // (a) Eq. 9: the pixel's own level, as in the steady state.
+        let rel = f64::from(now[adapted] / steady[adapted] - 1.0).abs();
+        assert!(
+            rel < 1e-4,
+            "region {region}: {} vs {}",
+            now[adapted],
+            steady[adapted]
+        );
+        // (b) the contrast about it, scaled by 10^(−E).
+        let c_now = f64::from(now[adapted] - now[half]);
+        let c_steady = f64::from(steady[adapted] - steady[half]);
+        let ratio = c_now / c_steady;
+        assert!(
+            (ratio / 10f64.powf(-excess) - 1.0).abs() < 1e-3,
+            "region {region}: contrast ×{ratio}, 10^-E = {}",
+            10f64.powf(-excess)
+        );
+        gain.push(c_steady / (0.5 * f64::from(level)));
+    }
+    // (c) Steady contrast gains (display per cd/m²) as Eq. 3 at each region's own level.
+    let want = photopic_scale(100.0, lda) / photopic_scale(1000.0, lda);
+    assert!(
+        (gain[1] / gain[0] / want - 1.0).abs() < 1e-3,
+        "gain ratio {} against Eq. 3's {want}",
+        gain[1] / gain[0]
+    );
+}
+
 /// Issue 8 §3 (failed before: a fall decayed the whole log excess toward the new level at
 /// the dark-adaptation rate, leaving Fig. 12b's rods 2.68 / 2.22 / 1.19 / 0.64 log above
 /// Eq. 5 at 3.5 / 5 / 10 / 15 min). The equivalent-background rule (Crawford 1947;

@@ -332,18 +332,8 @@ pub fn apply_owned(
     mapping: &LocalMapping,
 ) -> (DisplayImage, PixelStats) {
     assert_eq!((map.width, map.height), (image.width, image.height));
-    image
-        .check_consistent()
-        .expect("an image with consistent planes");
-    let HdrImage {
-        width,
-        height,
-        x: mut r,
-        y: mut g,
-        z: mut b,
-        scotopic,
-        ..
-    } = image;
+    let (width, height) = (image.width, image.height);
+    let ([mut r, mut g, mut b], scotopic) = image.into_planes();
     let blur = acuity_blur(map, width, height);
     let stats = operator::map_pass(&mut r, &mut g, &mut b, blur.is_none(), |start, r, g, b| {
         let end = start + r.len();
