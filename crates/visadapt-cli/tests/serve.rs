@@ -518,3 +518,27 @@ fn serve_refuses_a_bad_file_or_flag() {
         assert!(err.contains(says), "{args:?}: {err}");
     }
 }
+
+/// The viewer maps with the global operator only: options it cannot show are refused with
+/// one line naming them, before any port is opened, rather than silently ignored.
+#[test]
+fn options_the_viewer_cannot_show_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = chart(dir.path());
+    for (flags, named) in [
+        (&["--glare"][..], "--glare"),
+        (&["--adaptation", "local"][..], "--adaptation local"),
+    ] {
+        let out = visadapt()
+            .arg("serve")
+            .arg(&image)
+            .args(["--port", "0", "--no-open"])
+            .args(flags)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{flags:?} was accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(named), "{flags:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    }
+}

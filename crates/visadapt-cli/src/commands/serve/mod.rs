@@ -17,6 +17,13 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
             "--glare: the viewer does not show veiling glare yet (use map, sequence or video)"
         );
     }
+    // The viewer plans and maps every frame with the global mapping; taking
+    // `--adaptation local` and showing the global picture would mislead.
+    if args.viewing.adaptation.adaptation == crate::cli::AdaptationKind::Local {
+        anyhow::bail!(
+            "--adaptation local: the viewer does not show local adaptation yet (use map, sequence or video)"
+        );
+    }
     let conditions = args.viewing.conditions(
         Some(&args.display),
         None,
