@@ -18,6 +18,8 @@ use crate::cli::{PlotArgs, PlotName};
 use crate::graphics::{self, FAMILY, PictureFormat};
 use anyhow::anyhow;
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
+use plotters::element::{Drawable, PointCollection};
 use plotters::prelude::*;
 use visadapt::spectral::sensitivity::{
     FIG4_MESOPIC_CD_M2, FIG4_PHOTOPIC_CD_M2, FIG4_SCOTOPIC_CD_M2, spectral_sensitivity,
@@ -104,6 +106,75 @@ fn line(colour: RGBColor, width: u32) -> ShapeStyle {
     }
 }
 
+/// The frame of one chart: its caption, axis ranges, axis titles and tick decimals, in the
+/// style of a whole figure or of one of its panels.
+struct Axes<'t> {
+    caption: &'t str,
+    panel: bool,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+    x_desc: &'t str,
+    y_desc: &'t str,
+    x_decimals: usize,
+    y_decimals: usize,
+}
+
+type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+impl Axes<'_> {
+    /// Build the chart on `area` and draw its mesh and axis titles.
+    fn draw<'a, DB: DrawingBackend>(
+        &self,
+        area: &'a DrawingArea<DB, Shift>,
+    ) -> anyhow::Result<Chart<'a, DB>> {
+        // (caption, margin, x label area, y label area, tick labels, axis titles) in points.
+        let (caption, margin, x_area, y_area, ticks, titles) = if self.panel {
+            (18, 12, 45, 60, 13, 15)
+        } else {
+            (22, 20, 50, 70, 15, 17)
+        };
+        let mut chart = ChartBuilder::on(area)
+            .caption(self.caption, (FAMILY, caption))
+            .margin(margin)
+            .x_label_area_size(x_area)
+            .y_label_area_size(y_area)
+            .build_cartesian_2d(self.x.clone(), self.y.clone())
+            .map_err(plot_error)?;
+        let (xd, yd) = (self.x_decimals, self.y_decimals);
+        chart
+            .configure_mesh()
+            .x_desc(self.x_desc)
+            .y_desc(self.y_desc)
+            .x_label_formatter(&|x| format!("{x:.xd$}"))
+            .y_label_formatter(&|y| format!("{y:.yd$}"))
+            .label_style((FAMILY, ticks))
+            .axis_desc_style((FAMILY, titles))
+            .draw()
+            .map_err(plot_error)?;
+        Ok(chart)
+    }
+}
+
+/// Draw one labelled curve with its legend swatch.
+fn curve<DB: DrawingBackend, S>(
+    chart: &mut Chart<'_, DB>,
+    series: S,
+    label: &str,
+    style: ShapeStyle,
+) -> anyhow::Result<()>
+where
+    S: IntoIterator,
+    S::Item: Drawable<DB>,
+    for<'b> &'b S::Item: PointCollection<'b, (f64, f64)>,
+{
+    chart
+        .draw_series(series)
+        .map_err(plot_error)?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+    Ok(())
+}
+
 /// Wavelengths 380–780 nm in 1 nm steps.
 fn wavelengths() -> impl Iterator<Item = f64> + Clone {
     (380..=780).map(f64::from)
@@ -111,23 +182,17 @@ fn wavelengths() -> impl Iterator<Item = f64> + Clone {
 
 /// Fig. 2.
 fn luminous_efficiency<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
-    let mut chart = ChartBuilder::on(root)
-        .caption(title(PlotName::LuminousEfficiency), (FAMILY, 22))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
-        .build_cartesian_2d(380f64..780f64, 0f64..1.05f64)
-        .map_err(plot_error)?;
-    chart
-        .configure_mesh()
-        .x_desc("wavelength λ (nm)")
-        .y_desc("relative luminous efficiency")
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y:.1}"))
-        .label_style((FAMILY, 15))
-        .axis_desc_style((FAMILY, 17))
-        .draw()
-        .map_err(plot_error)?;
+    let mut chart = Axes {
+        caption: title(PlotName::LuminousEfficiency),
+        panel: false,
+        x: 380.0..780.0,
+        y: 0.0..1.05,
+        x_desc: "wavelength λ (nm)",
+        y_desc: "relative luminous efficiency",
+        x_decimals: 0,
+        y_decimals: 1,
+    }
+    .draw(root)?;
     let curves = [
         (
             "scotopic V'(λ), CIE 1951 (rods)",
@@ -142,11 +207,12 @@ fn luminous_efficiency<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> any
     ];
     for (label, table, colour) in curves {
         let points = wavelengths().filter_map(|nm| interpolate(table, nm).map(|v| (nm, v)));
-        chart
-            .draw_series(LineSeries::new(points, line(colour, 3)))
-            .map_err(plot_error)?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(colour, 3)));
+        curve(
+            &mut chart,
+            LineSeries::new(points, line(colour, 3)),
+            label,
+            line(colour, 3),
+        )?;
     }
     legend(&mut chart, SeriesLabelPosition::UpperRight)
 }
@@ -168,23 +234,17 @@ fn legend<'a, DB: DrawingBackend + 'a, X: Ranged, Y: Ranged>(
 /// Fig. 3.
 fn tvi_curves<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
     let (lo, hi) = (-6.0, 5.0);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title(PlotName::Tvi), (FAMILY, 22))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
-        .build_cartesian_2d(lo..hi, -3.5f64..5.0f64)
-        .map_err(plot_error)?;
-    chart
-        .configure_mesh()
-        .x_desc("log₁₀ adaptation luminance La (cd/m²; scotopic cd/m² for rods)")
-        .y_desc("log₁₀ threshold ΔL (same units)")
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y:.0}"))
-        .label_style((FAMILY, 15))
-        .axis_desc_style((FAMILY, 17))
-        .draw()
-        .map_err(plot_error)?;
+    let mut chart = Axes {
+        caption: title(PlotName::Tvi),
+        panel: false,
+        x: lo..hi,
+        y: -3.5..5.0,
+        x_desc: "log₁₀ adaptation luminance La (cd/m²; scotopic cd/m² for rods)",
+        y_desc: "log₁₀ threshold ΔL (same units)",
+        x_decimals: 0,
+        y_decimals: 0,
+    }
+    .draw(root)?;
     let xs = (0..=1100).map(move |i| lo + i as f64 * (hi - lo) / 1100.0);
     type Curve = (&'static str, fn(f64) -> f64, RGBColor);
     let curves: [Curve; 2] = [
@@ -192,14 +252,8 @@ fn tvi_curves<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Resu
         ("cones, Eq. 4 (cd/m²)", tvi::log_cone_threshold, CONES),
     ];
     for (label, f, colour) in curves {
-        chart
-            .draw_series(LineSeries::new(
-                xs.clone().map(|x| (x, f(x))),
-                line(colour, 3),
-            ))
-            .map_err(plot_error)?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(colour, 3)));
+        let series = LineSeries::new(xs.clone().map(|x| (x, f(x))), line(colour, 3));
+        curve(&mut chart, series, label, line(colour, 3))?;
     }
     legend(&mut chart, SeriesLabelPosition::UpperLeft)
 }
@@ -207,33 +261,23 @@ fn tvi_curves<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Resu
 /// Fig. 7.
 fn acuity_curve<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
     let (lo, hi) = (-4.0, 4.0);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title(PlotName::Acuity), (FAMILY, 22))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(70)
-        .build_cartesian_2d(lo..hi, 0f64..60f64)
-        .map_err(plot_error)?;
-    chart
-        .configure_mesh()
-        .x_desc("log₁₀ adaptation luminance (cd/m²)")
-        .y_desc("highest resolvable frequency (cycles/degree)")
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y:.0}"))
-        .label_style((FAMILY, 15))
-        .axis_desc_style((FAMILY, 17))
-        .draw()
-        .map_err(plot_error)?;
+    let mut chart = Axes {
+        caption: title(PlotName::Acuity),
+        panel: false,
+        x: lo..hi,
+        y: 0.0..60.0,
+        x_desc: "log₁₀ adaptation luminance (cd/m²)",
+        y_desc: "highest resolvable frequency (cycles/degree)",
+        x_decimals: 0,
+        y_decimals: 0,
+    }
+    .draw(root)?;
     let xs = (0..=800).map(move |i| lo + i as f64 * (hi - lo) / 800.0);
     let black = RGBColor(20, 20, 20);
-    chart
-        .draw_series(LineSeries::new(
-            xs.map(|x| (x, acuity::cutoff_cycles_per_degree(10f64.powf(x)))),
-            line(black, 3),
-        ))
-        .map_err(plot_error)?
-        .label("Shaler (1937), fit of Ward Larson et al. (1997)")
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(black, 3)));
+    let points = xs.map(|x| (x, acuity::cutoff_cycles_per_degree(10f64.powf(x))));
+    let series = LineSeries::new(points, line(black, 3));
+    let label = "Shaler (1937), fit of Ward Larson et al. (1997)";
+    curve(&mut chart, series, label, line(black, 3))?;
     // Snellen equivalents at the paper's two anchors (Sec. 3.4).
     for x in [3.0f64, -3.3] {
         let f = acuity::cutoff_cycles_per_degree(10f64.powf(x));
@@ -277,54 +321,43 @@ fn spectral<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyhow::Result
         + 0.5;
     let bottom = top - 9.0;
     for ((panel, (name, level)), row) in panels.iter().zip(levels).zip(&all) {
-        let mut chart = ChartBuilder::on(panel)
-            .caption(format!("{name}, {level} cd/m²"), (FAMILY, 18))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(60)
-            .build_cartesian_2d(400f64..700f64, bottom..top)
-            .map_err(plot_error)?;
-        chart
-            .configure_mesh()
-            .x_desc("wavelength λ (nm)")
-            .y_desc("log₁₀ sensitivity (sr·m²/W)")
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .y_label_formatter(&|y| format!("{y:.0}"))
-            .label_style((FAMILY, 13))
-            .axis_desc_style((FAMILY, 15))
-            .draw()
-            .map_err(plot_error)?;
+        let mut chart = Axes {
+            caption: &format!("{name}, {level} cd/m²"),
+            panel: true,
+            x: 400.0..700.0,
+            y: bottom..top,
+            x_desc: "wavelength λ (nm)",
+            y_desc: "log₁₀ sensitivity (sr·m²/W)",
+            x_decimals: 0,
+            y_decimals: 0,
+        }
+        .draw(panel)?;
         let clip = |v: f64| v.max(bottom);
         let rods: Vec<(f64, f64)> = row
             .iter()
             .filter_map(|s| s.log_rod.map(|r| (s.wavelength_nm, clip(r))))
             .collect();
         if !rods.is_empty() {
-            chart
-                .draw_series(DashedLineSeries::new(rods, 8, 5, line(RODS, 2)))
-                .map_err(plot_error)?
-                .label("rods (Eq. 5, weighted by k of Eq. 6)")
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(RODS, 2)));
+            let series = DashedLineSeries::new(rods, 8, 5, line(RODS, 2));
+            curve(
+                &mut chart,
+                series,
+                "rods (Eq. 5, weighted by k of Eq. 6)",
+                line(RODS, 2),
+            )?;
         }
-        chart
-            .draw_series(DashedLineSeries::new(
-                row.iter().map(|s| (s.wavelength_nm, clip(s.log_cone))),
-                8,
-                5,
-                line(CONES, 2),
-            ))
-            .map_err(plot_error)?
-            .label("cones (Eq. 4)")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(CONES, 2)));
+        let cones = row.iter().map(|s| (s.wavelength_nm, clip(s.log_cone)));
+        let series = DashedLineSeries::new(cones, 8, 5, line(CONES, 2));
+        curve(&mut chart, series, "cones (Eq. 4)", line(CONES, 2))?;
         let black = RGBColor(20, 20, 20);
-        chart
-            .draw_series(LineSeries::new(
-                row.iter().map(|s| (s.wavelength_nm, clip(s.log_system()))),
-                line(black, 3),
-            ))
-            .map_err(plot_error)?
-            .label("visual system (the more sensitive)")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], line(black, 3)));
+        let system = row.iter().map(|s| (s.wavelength_nm, clip(s.log_system())));
+        let series = LineSeries::new(system, line(black, 3));
+        curve(
+            &mut chart,
+            series,
+            "visual system (the more sensitive)",
+            line(black, 3),
+        )?;
         legend(&mut chart, SeriesLabelPosition::LowerMiddle)?;
     }
     Ok(())
@@ -363,23 +396,17 @@ fn timecourse_curves<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyho
         let y_lo = points().map(|p| p.1).fold(f64::MAX, f64::min);
         let y_hi = points().map(|p| p.1).fold(f64::MIN, f64::max);
         let pad = 0.1 * (y_hi - y_lo).max(0.5);
-        let mut chart = ChartBuilder::on(panel)
-            .caption(caption, (FAMILY, 18))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0f64..t_max, (y_lo - pad)..(y_hi + pad))
-            .map_err(plot_error)?;
-        chart
-            .configure_mesh()
-            .x_desc(format!("time after the change ({unit})"))
-            .y_desc("log₁₀ threshold (cd/m²; scotopic for rods)")
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .y_label_formatter(&|y| format!("{y:.1}"))
-            .label_style((FAMILY, 13))
-            .axis_desc_style((FAMILY, 15))
-            .draw()
-            .map_err(plot_error)?;
+        let mut chart = Axes {
+            caption,
+            panel: true,
+            x: 0.0..t_max,
+            y: (y_lo - pad)..(y_hi + pad),
+            x_desc: &format!("time after the change ({unit})"),
+            y_desc: "log₁₀ threshold (cd/m²; scotopic for rods)",
+            x_decimals: 0,
+            y_decimals: 1,
+        }
+        .draw(panel)?;
         for curve in &figure.curves {
             let (colour, width) = match curve.label {
                 "rods" => (RODS, 2),
@@ -387,14 +414,13 @@ fn timecourse_curves<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>) -> anyho
                 _ => (black, 4),
             };
             let style = line(colour, width);
-            chart
-                .draw_series(LineSeries::new(
-                    curve.points.iter().map(|&(t, y)| (t / per_unit, y)),
-                    style,
-                ))
-                .map_err(plot_error)?
-                .label(curve.label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], style));
+            let points = curve.points.iter().map(|&(t, y)| (t / per_unit, y));
+            self::curve(
+                &mut chart,
+                LineSeries::new(points, style),
+                curve.label,
+                style,
+            )?;
         }
         legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     }
