@@ -425,7 +425,9 @@ impl Geometry {
                 let r2 = x * x + y * y;
                 let r = r2.sqrt();
                 let (a, b) = along(r.atan(), r, x, y);
-                Some((a, b, area / (1.0 + r2).powf(1.5)))
+                // (1 + r²)^1.5, without the cost of `powf`.
+                let q = 1.0 + r2;
+                Some((a, b, area / (q * q.sqrt())))
             }
             Projection::AngularFisheye => {
                 let t = (x * x + y * y).sqrt().to_radians();
@@ -466,6 +468,36 @@ impl Geometry {
             Projection::Parallel => None,
         }
     }
+
+    /// [`Geometry::look`] for the left half of row `j` of a `w`-pixel-wide image (the
+    /// pixels `0..⌈w/2⌉`), into `looks`. The image centre lies between the two middle
+    /// pixels (or on the middle one), so pixel `w − 1 − i` sits at exactly the negated
+    /// offsets of pixel `i`, and every projection's look is odd in each offset: the right
+    /// half, and row `h − 1 − j`, follow by a change of sign ([`mirrored`]). Each
+    /// transcendental is then evaluated once for two pixels (four in [`Grid::splat`]).
+    fn row_looks(&self, j: usize, w: usize, looks: &mut Vec<Option<(f64, f64, f64)>>) {
+        let py = j as f64 + 0.5;
+        looks.clear();
+        looks.extend((0..w.div_ceil(2)).map(|i| self.look(i as f64 + 0.5, py)));
+    }
+}
+
+/// Pixel `i`'s look from the left half-row `looks` of [`Geometry::row_looks`] (of the
+/// mirrored row when `flip_b`), for an image `w` pixels wide.
+#[inline]
+fn mirrored(
+    looks: &[Option<(f64, f64, f64)>],
+    i: usize,
+    w: usize,
+    flip_b: bool,
+) -> Option<(f64, f64, f64)> {
+    let (q, flip_a) = if i < looks.len() {
+        (i, false)
+    } else {
+        (w - 1 - i, true)
+    };
+    let sign = |flip: bool, v: f64| if flip { -v } else { v };
+    looks[q].map(|(a, b, omega)| (sign(flip_a, a), sign(flip_b, b), omega))
 }
 
 /// The angular grid the convolution runs on.
@@ -566,26 +598,48 @@ impl Grid {
     fn splat(&self, geometry: &Geometry, planes: [&[f32]; 4], w: usize, h: usize) -> [Vec<f64>; 4] {
         let cells = self.nx * self.ny;
         let empty = || std::array::from_fn::<Vec<f64>, 4, _>(|_| vec![0.0; cells]);
-        let rows = |mut acc: [Vec<f64>; 4], j: usize| {
-            let py = j as f64 + 0.5;
-            for i in 0..w {
-                let k = j * w + i;
-                let v = [planes[0][k], planes[1][k], planes[2][k], planes[3][k]];
-                if !v.iter().all(|c| c.is_finite() && *c >= 0.0) || v.iter().all(|c| *c == 0.0) {
-                    continue;
-                }
-                let Some((a, b, omega)) = geometry.look(i as f64 + 0.5, py) else {
-                    continue;
-                };
-                for (cell, wt) in self.bilinear(self.to_grid(a, b)) {
-                    let f = wt * omega;
-                    for (acc, v) in acc.iter_mut().zip(v) {
-                        acc[cell] += f * v as f64;
+        // Rows are taken in mirrored pairs (j, h − 1 − j), which share their looks.
+        let pairs = h.div_ceil(2);
+        let band = |range: std::ops::Range<usize>| {
+            let mut acc = empty();
+            let mut looks = Vec::new();
+            for jp in range {
+                geometry.row_looks(jp, w, &mut looks);
+                let mirror = h - 1 - jp;
+                for (j, flip_b) in [(jp, false), (mirror, true)] {
+                    if flip_b && mirror == jp {
+                        continue;
+                    }
+                    for i in 0..w {
+                        let k = j * w + i;
+                        let v = [planes[0][k], planes[1][k], planes[2][k], planes[3][k]];
+                        if !v.iter().all(|c| c.is_finite() && *c >= 0.0)
+                            || v.iter().all(|c| *c == 0.0)
+                        {
+                            continue;
+                        }
+                        let Some((a, b, omega)) = mirrored(&looks, i, w, flip_b) else {
+                            continue;
+                        };
+                        for (cell, wt) in self.bilinear(self.to_grid(a, b)) {
+                            let f = wt * omega;
+                            for (acc, v) in acc.iter_mut().zip(v) {
+                                acc[cell] += f * v as f64;
+                            }
+                        }
                     }
                 }
             }
             acc
         };
+        // One band of row pairs per thread: each band fills grids of its own (four planes
+        // of the whole grid), so more bands than threads would only add grids to clear
+        // and to sum.
+        #[cfg(feature = "rayon")]
+        let bands = rayon::current_num_threads().clamp(1, pairs.max(1));
+        #[cfg(not(feature = "rayon"))]
+        let bands = 1;
+        let range = |b: usize| b * pairs / bands..(b + 1) * pairs / bands;
         let add = |mut a: [Vec<f64>; 4], b: [Vec<f64>; 4]| {
             for (a, b) in a.iter_mut().zip(&b) {
                 a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
@@ -595,16 +649,15 @@ impl Grid {
         #[cfg(feature = "rayon")]
         {
             use rayon::prelude::*;
-            (0..h)
+            (0..bands)
                 .into_par_iter()
-                .with_min_len(64)
-                .fold(empty, rows)
-                .reduce(empty, add)
+                .map(|b| band(range(b)))
+                .reduce_with(add)
+                .unwrap_or_else(empty)
         }
         #[cfg(not(feature = "rayon"))]
         {
-            let _ = add;
-            (0..h).fold(empty(), rows)
+            (0..bands).map(|b| band(range(b))).fold(empty(), add)
         }
     }
 
@@ -616,8 +669,10 @@ impl Grid {
         let mut k = vec![0.0f64; fw * fh];
         let g = self.cell_deg;
         let (rx, ry) = (self.nx as i64 - 1, self.ny as i64 - 1);
-        for dy in -ry..=ry {
-            for dx in -rx..=rx {
+        // The kernel is even in both offsets (its sub-samples lie symmetrically about each
+        // cell's centre): each value of the first quadrant goes to its four mirror images.
+        for dy in 0..=ry {
+            for dx in 0..=rx {
                 let r = ((dx * dx + dy * dy) as f64).sqrt();
                 // Sub-samples per axis.
                 let n = if r < 4.0 {
@@ -638,9 +693,12 @@ impl Grid {
                         }
                     }
                 }
-                let x = dx.rem_euclid(fw as i64) as usize;
-                let y = dy.rem_euclid(fh as i64) as usize;
-                k[y * fw + x] = sum / ((n * n) as f64 * norm);
+                let value = sum / ((n * n) as f64 * norm);
+                for (mx, my) in [(dx, dy), (-dx, dy), (dx, -dy), (-dx, -dy)] {
+                    let x = mx.rem_euclid(fw as i64) as usize;
+                    let y = my.rem_euclid(fh as i64) as usize;
+                    k[y * fw + x] = value;
+                }
             }
         }
         // The cell average (a box, variance 1/12 cell² per axis), the bilinear splat and
@@ -770,15 +828,15 @@ impl Grid {
     ) -> f64 {
         let [x, y, z, s] = planes;
         let n = x.len() as f64;
-        let row = |(j, (((x, y), z), s)): RowPlanes| {
-            let py = j as f64 + 0.5;
+        let row = |looks: &mut Vec<_>, (j, (((x, y), z), s)): RowPlanes| {
+            geometry.row_looks(j, width, looks);
             let mut sum = 0.0;
             for i in 0..x.len() {
                 let px = [x[i], y[i], z[i], s[i]];
                 if !px.iter().all(|c| c.is_finite() && *c >= 0.0) {
                     continue;
                 }
-                let Some((a, b, _)) = geometry.look(i as f64 + 0.5, py) else {
+                let Some((a, b, _)) = mirrored(looks, i, width, false) else {
                     continue;
                 };
                 let weights = self.bilinear(self.to_grid(a, b));
@@ -803,7 +861,7 @@ impl Grid {
                 .zip(z.par_chunks_mut(width))
                 .zip(s.par_chunks_mut(width))
                 .enumerate()
-                .map(row)
+                .map_init(Vec::new, row)
                 .sum()
         };
         #[cfg(not(feature = "rayon"))]
@@ -813,7 +871,10 @@ impl Grid {
             .zip(z.chunks_mut(width))
             .zip(s.chunks_mut(width))
             .enumerate()
-            .map(row)
+            .map({
+                let mut looks = Vec::new();
+                move |r| row(&mut looks, r)
+            })
             .sum();
         total / n
     }
@@ -842,5 +903,63 @@ fn fft_friendly(min: usize) -> usize {
             return n;
         }
         n += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The mirrored half-row looks are the direct looks of every pixel, bit for bit, for
+    /// every projection with an angular extent, on images of odd and even sizes (the
+    /// splat and the read-back rely on the looks being odd in each offset).
+    #[test]
+    fn mirrored_looks_equal_direct_looks_bit_for_bit() {
+        let projections = [
+            (Projection::Perspective, 70.0, 50.0),
+            (Projection::AngularFisheye, 200.0, 180.0),
+            (Projection::HemisphericalFisheye, 180.0, 180.0),
+            (Projection::Cylindrical, 300.0, 80.0),
+            (Projection::Planisphere, 250.0, 200.0),
+        ];
+        for (projection, horizontal_deg, vertical_deg) in projections {
+            for (w, h) in [(17, 9), (16, 10), (1, 1), (2, 3)] {
+                let view = View {
+                    projection,
+                    horizontal_deg,
+                    vertical_deg,
+                };
+                let geometry = Geometry::new(&view, w, h).unwrap();
+                let mut looks = Vec::new();
+                let mut outside = 0;
+                for j in 0..h.div_ceil(2) {
+                    geometry.row_looks(j, w, &mut looks);
+                    for (row, flip_b) in [(j, false), (h - 1 - j, true)] {
+                        for i in 0..w {
+                            let direct = geometry.look(i as f64 + 0.5, row as f64 + 0.5);
+                            let bits = |l: Option<(f64, f64, f64)>| {
+                                l.map(|(a, b, o)| (a.to_bits(), b.to_bits(), o.to_bits()))
+                            };
+                            // Zero offsets may differ in sign only (−0 and +0 land on
+                            // the same grid position).
+                            let clean = |l: Option<(f64, f64, f64)>| {
+                                l.map(|(a, b, o)| (a + 0.0, b + 0.0, o))
+                            };
+                            assert_eq!(
+                                bits(clean(mirrored(&looks, i, w, flip_b))),
+                                bits(clean(direct)),
+                                "{projection:?} {w}x{h} pixel ({i}, {row})"
+                            );
+                            outside += usize::from(direct.is_none());
+                        }
+                    }
+                }
+                // The wide fisheyes leave their corners outside their domain, so both
+                // branches are exercised.
+                if projection == Projection::HemisphericalFisheye && w == 17 {
+                    assert!(outside > 0);
+                }
+            }
+        }
     }
 }
