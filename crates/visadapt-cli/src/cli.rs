@@ -660,13 +660,17 @@ fn parse_memory(s: &str) -> Result<u64, String> {
     }
 }
 
-/// A positive, finite number: luminances, factors, angles, rates; at most
-/// [`visadapt::MAX_LUMINANCE_CD_M2`], the range the f32 pipeline carries.
+/// A positive, finite number: luminances, factors, angles, rates; from
+/// [`visadapt::MIN_LUMINANCE_CD_M2`] to [`visadapt::MAX_LUMINANCE_CD_M2`], the range the
+/// f32 pipeline carries.
 fn positive(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 && v <= visadapt::MAX_LUMINANCE_CD_M2 => Ok(v),
+        Ok(v) if (visadapt::MIN_LUMINANCE_CD_M2..=visadapt::MAX_LUMINANCE_CD_M2).contains(&v) => {
+            Ok(v)
+        }
         Ok(_) => Err(format!(
-            "must be a positive number of at most {:e} (the range the f32 pipeline carries)",
+            "must be a positive number from {:e} to {:e} (the range the f32 pipeline carries)",
+            visadapt::MIN_LUMINANCE_CD_M2,
             visadapt::MAX_LUMINANCE_CD_M2
         )),
         Err(_) => Err("not a number".into()),

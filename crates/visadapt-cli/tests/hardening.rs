@@ -264,6 +264,17 @@ fn flags_beyond_the_f32_range_are_refused_by_their_own_name() {
         &["timecourse", "--from", "1e300", "--to", "1", "--times", "0"],
         "--from",
     );
+    // Below the range too: a 1e-300 cd/m² display became 0 in f32 and the map was written.
+    fails_with(
+        d,
+        &["map", "scene.hdr", "-o", "o.png", "--display-max", "1e-300"],
+        "display-max",
+    );
+    fails_with(
+        d,
+        &["map", "scene.hdr", "-o", "o.png", "--scale", "1e-40"],
+        "scale",
+    );
     assert!(files_in(d).iter().all(|f| f == "scene.hdr"));
 }
 

@@ -324,7 +324,7 @@ def test_nan_and_negative_pixels_follow_the_library_policy():
 
 def test_bad_parameters_raise_value_error_with_the_library_message():
     image = visadapt.chart(white=10)
-    with pytest.raises(ValueError, match=r"^invalid display-max -1: must be a positive luminance of at most 1e19 cd/m²"):
+    with pytest.raises(ValueError, match=r"^invalid display-max -1: must be a positive luminance from 1e-19 to 1e19 cd/m²"):
         visadapt.map(image, display_max=-1)
     with pytest.raises(ValueError, match=r"^invalid fov NaN: must be a positive, finite number$"):
         visadapt.map(image, fov=float("nan"))

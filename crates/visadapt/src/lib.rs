@@ -64,7 +64,7 @@ pub mod visibility;
 
 pub use error::{Error, LimitsExceeded, Result};
 pub use image::{DisplayImage, HdrImage, Projection, View};
-pub use limits::{Limits, MAX_LUMINANCE_CD_M2, check_factor, check_luminance};
+pub use limits::{Limits, MAX_LUMINANCE_CD_M2, MIN_LUMINANCE_CD_M2, check_factor, check_luminance};
 
 /// The README's Rust examples, compiled and run as doc tests (`cargo test --doc`); its
 /// command lines are run by the CLI's `tests/readme.rs`.

@@ -10,6 +10,13 @@ use crate::error::{Error, LimitsExceeded, Result};
 /// 1.6e9 cd/m² (Wyszecki & Stiles, *Color Science*, 2nd ed., 1982, Table 1(4.4)).
 pub const MAX_LUMINANCE_CD_M2: f64 = 1e19;
 
+/// Smallest luminance (cd/m², or scotopic cd/m²) a parameter may have: 1e-19, the
+/// reciprocal of [`MAX_LUMINANCE_CD_M2`] and just above √ of `f32::MIN_POSITIVE` ≈
+/// 1.08e-19, so that it is a normal `f32` (1e-300 became 0 in the f32 pipeline, a
+/// division by zero) and the ratio of any two parameters stays finite. Our bound; the
+/// absolute threshold of vision lies near 1e-6 cd/m² (Hecht, Shlaer & Pirenne 1942).
+pub const MIN_LUMINANCE_CD_M2: f64 = 1e-19;
+
 /// `v` as `f32`, saturating finite values at ±`f32::MAX` instead of overflowing to ±Inf
 /// (`as` rounds them to infinity); Inf and NaN pass through.
 #[inline]
@@ -30,32 +37,40 @@ fn number(v: f64) -> String {
     }
 }
 
-/// Check a luminance parameter named `name` (as the CLI spells it): positive, finite and at
-/// most [`MAX_LUMINANCE_CD_M2`]. Returns it.
+/// Whether `v` lies in [[`MIN_LUMINANCE_CD_M2`], [`MAX_LUMINANCE_CD_M2`]] (NaN does not).
+#[inline]
+fn in_carried_range(v: f64) -> bool {
+    (MIN_LUMINANCE_CD_M2..=MAX_LUMINANCE_CD_M2).contains(&v)
+}
+
+/// Check a luminance parameter named `name` (as the CLI spells it): finite and between
+/// [`MIN_LUMINANCE_CD_M2`] and [`MAX_LUMINANCE_CD_M2`]. Returns it.
 pub fn check_luminance(name: &'static str, v: f64) -> Result<f64> {
-    if v.is_finite() && v > 0.0 && v <= MAX_LUMINANCE_CD_M2 {
+    if in_carried_range(v) {
         Ok(v)
     } else {
         Err(Error::invalid(
             name,
             number(v),
             format!(
-                "must be a positive luminance of at most {MAX_LUMINANCE_CD_M2:e} cd/m² (the range the f32 pipeline carries)"
+                "must be a positive luminance from {MIN_LUMINANCE_CD_M2:e} to {MAX_LUMINANCE_CD_M2:e} cd/m² (the range the f32 pipeline carries)"
             ),
         ))
     }
 }
 
-/// Check a positive factor named `name` (e.g. `scale`): positive, finite and at most
-/// [`MAX_LUMINANCE_CD_M2`] (it multiplies luminances).
+/// Check a positive factor named `name` (e.g. `scale`): finite and between
+/// [`MIN_LUMINANCE_CD_M2`] and [`MAX_LUMINANCE_CD_M2`] (it multiplies luminances).
 pub fn check_factor(name: &'static str, v: f64) -> Result<f64> {
-    if v.is_finite() && v > 0.0 && v <= MAX_LUMINANCE_CD_M2 {
+    if in_carried_range(v) {
         Ok(v)
     } else {
         Err(Error::invalid(
             name,
             number(v),
-            format!("must be a positive number of at most {MAX_LUMINANCE_CD_M2:e}"),
+            format!(
+                "must be a positive number from {MIN_LUMINANCE_CD_M2:e} to {MAX_LUMINANCE_CD_M2:e}"
+            ),
         ))
     }
 }

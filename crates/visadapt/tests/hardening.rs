@@ -239,6 +239,21 @@ fn luminances_beyond_the_f32_range_are_refused_by_name() {
                 ..ViewingConditions::default()
             },
         ),
+        // Below the range: 1e-300 is 0 as f32, 1e-45 a subnormal.
+        (
+            "display-max",
+            ViewingConditions {
+                display_max_cd_m2: 1e-300,
+                ..ViewingConditions::default()
+            },
+        ),
+        (
+            "world-adaptation",
+            ViewingConditions {
+                world_adaptation_cd_m2: Some(1e-45),
+                ..ViewingConditions::default()
+            },
+        ),
     ] {
         let e = conditions.validate().unwrap_err();
         assert!(

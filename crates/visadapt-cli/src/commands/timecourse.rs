@@ -8,7 +8,8 @@ use visadapt::report;
 use visadapt::scotopic::EQUAL_ENERGY_SP_RATIO;
 use visadapt::timecourse::{Moment, course};
 
-/// Check a luminance flag: positive, at most [`visadapt::MAX_LUMINANCE_CD_M2`] (the range
+/// Check a luminance flag: from [`visadapt::MIN_LUMINANCE_CD_M2`] to
+/// [`visadapt::MAX_LUMINANCE_CD_M2`] (the range
 /// the f32 pipeline carries).
 pub fn positive(flag: &'static str, v: f64) -> anyhow::Result<f64> {
     Ok(visadapt::check_luminance(flag, v)?)
