@@ -742,7 +742,7 @@ fn previews_with_glare_and_local_adaptation_are_the_librarys() {
 /// reaches the retina there.
 #[test]
 fn pixel_reads_local_thresholds_and_the_veil() {
-    use visadapt::operator::{self, AdaptationMode, ViewingConditions};
+    use visadapt::operator::{self, ViewingConditions};
     use visadapt::visibility::Sensitivity;
     use visadapt::{glare::Glare, local, preview};
     let dir = tempfile::tempdir().unwrap();
