@@ -194,7 +194,7 @@ pub enum ProjectionArg {
 }
 
 /// One adaptation level for the scene or one per pixel (map, visible, tolerance, sequence,
-/// video, demo).
+/// video, demo, serve).
 #[derive(Debug, Clone, Args)]
 pub struct AdaptationArgs {
     /// How the observer adapts: `global`, one level for the whole scene (the paper's
@@ -234,7 +234,7 @@ impl AdaptationArgs {
     }
 }
 
-/// Model options every image command has (map, visible, tolerance, sequence, video).
+/// Model options every image command has (map, visible, tolerance, sequence, video, serve).
 #[derive(Debug, Clone, Args)]
 pub struct ViewingArgs {
     #[command(flatten)]
@@ -249,7 +249,7 @@ pub struct ViewingArgs {
     pub glare: GlareArgs,
 }
 
-/// Veiling glare in the observer's eye (map, visible, tolerance, sequence, video, demo).
+/// Veiling glare in the observer's eye (map, visible, tolerance, sequence, video, demo, serve).
 #[derive(Debug, Clone, Args)]
 pub struct GlareArgs {
     /// Add veiling glare: light scattered in the eye (CIE 135/1 glare spread function) is
@@ -1161,10 +1161,13 @@ Examples:
   visadapt serve scene.hdr                      # opens http://127.0.0.1:8765/ in the browser
   visadapt serve render.exr --port 0 --no-open  # any free port; the URL is printed
   visadapt serve photo.pfm --scale 179 --fov 40
+  visadapt serve night.exr --glare --adaptation local   # start with glare and local adaptation
 
-The page maps the image as the controls move (all model work is the library's). Its API, for
-scripts: GET /api/frame?peak=L&t=S&from=L0&display_max=D&fov=F&acuity=0|1&width=W&mode=model|exposure
-(PNG), /api/report?... (JSON, the keys of map --json), /api/pixel?x=&y=&change=C&... (JSON).
+The page maps the image as the controls move (all model work is the library's); glare and the
+adaptation (global or local) switch on the page, the flags set how it starts. Its API, for
+scripts: GET /api/frame?peak=L&t=S&from=L0&display_max=D&fov=F&acuity=0|1&glare=0|1&
+adaptation=global|local&width=W&mode=model|exposure (PNG), /api/report?... (JSON, the keys of
+map --json), /api/pixel?x=&y=&change=C&... (JSON).
 Ctrl-C stops the server.";
 
 #[cfg(feature = "serve")]

@@ -49,11 +49,14 @@ impl Server {
             .get(format!("{}{path_and_query}", self.url))
             .call()
             .unwrap();
-        let content_type = r
-            .headers()
-            .get("content-type")
-            .map(|v| v.to_str().unwrap().to_string())
-            .unwrap_or_default();
+        let header = |name: &str| {
+            r.headers()
+                .get(name)
+                .map(|v| v.to_str().unwrap().to_string())
+                .unwrap_or_default()
+        };
+        let content_type = header("content-type");
+        let showing = header("x-visadapt-showing");
         let body = r
             .body_mut()
             .with_config()
@@ -63,6 +66,7 @@ impl Server {
         Reply {
             status: r.status().as_u16(),
             content_type,
+            showing,
             body,
         }
     }
@@ -92,6 +96,8 @@ impl Drop for Server {
 struct Reply {
     status: u16,
     content_type: String,
+    /// What a frame shows (`x-visadapt-showing`).
+    showing: String,
     body: Vec<u8>,
 }
 
@@ -346,6 +352,15 @@ fn bad_parameters_are_400_with_one_line() {
         ("/api/frame?from=5", "parameter \"from\" needs \"t\""),
         ("/api/frame?from=5&t=-1", "invalid t -1"),
         ("/api/frame?mode=hdr", "invalid mode \"hdr\""),
+        (
+            "/api/frame?glare=yes",
+            "invalid glare \"yes\": must be 0 or 1",
+        ),
+        (
+            "/api/report?adaptation=Local",
+            "invalid adaptation \"Local\": must be global or local",
+        ),
+        ("/api/pixel?x=1&y=1&glare=2", "invalid glare \"2\""),
         ("/api/frame?peak=1&peak=2", "parameter \"peak\" given twice"),
         ("/api/frame?Peak=1", "unknown parameter \"Peak\""),
         ("/api/frame?x=1", "unknown parameter \"x\""),
@@ -519,26 +534,323 @@ fn serve_refuses_a_bad_file_or_flag() {
     }
 }
 
-/// The viewer maps with the global operator only: options it cannot show are refused with
-/// one line naming them, before any port is opened, rather than silently ignored.
+/// The largest difference of two decoded PNGs' code values (their sizes must agree).
+fn max_diff(a: &(u32, u32, Vec<u8>), b: &(u32, u32, Vec<u8>)) -> u8 {
+    assert_eq!((a.0, a.1), (b.0, b.1));
+    a.2.iter()
+        .zip(&b.2)
+        .map(|(x, y)| x.abs_diff(*y))
+        .max()
+        .unwrap_or(0)
+}
+
+/// With glare and local adaptation switched on by the API, the report is `map --json`'s
+/// with the same flags and the full-resolution frame is `map`'s PNG pixel for pixel; the
+/// caches keep the settings apart: switching back and forth gives each setting's own
+/// frame, and the frame says what it shows.
 #[test]
-fn options_the_viewer_cannot_show_are_refused() {
+fn glare_and_local_adaptation_equal_map() {
     let dir = tempfile::tempdir().unwrap();
     let image = chart(dir.path());
-    for (flags, named) in [
-        (&["--glare"][..], "--glare"),
-        (&["--adaptation", "local"][..], "--adaptation local"),
+    let server = Server::start(&image, &["--fov", "6.7173"]);
+    let view = ["--fov", "6.7173"];
+    let cases: [(&str, &[&str]); 5] = [
+        ("peak=0.04", &[]),
+        ("peak=0.04&glare=1", &["--glare"]),
+        ("peak=0.04&adaptation=local", &["--adaptation", "local"]),
+        (
+            "peak=0.04&glare=1&adaptation=local",
+            &["--glare", "--adaptation", "local"],
+        ),
+        (
+            "peak=1000&glare=1&adaptation=local&acuity=0",
+            &["--glare", "--adaptation", "local", "--no-acuity"],
+        ),
+    ];
+    let mut expected = Vec::new();
+    for (query, flags) in cases {
+        let peak = query.split('&').next().unwrap().trim_start_matches("peak=");
+        let args: Vec<&str> = ["--peak", peak]
+            .into_iter()
+            .chain(view)
+            .chain(flags.iter().copied())
+            .collect();
+        expected.push(map(&image, &args, dir.path()));
+    }
+    // Twice through, in an order that changes one setting at a time.
+    for round in 0..2 {
+        for (i, (query, flags)) in cases.iter().enumerate() {
+            let (report, png) = &expected[i];
+            let got = server.json(&format!("/api/report?{query}"));
+            assert_eq!(&got, report, "round {round}: {query}");
+            assert_eq!(
+                got["adaptation"],
+                if query.contains("local") {
+                    "local"
+                } else {
+                    "global"
+                }
+            );
+            assert_eq!(
+                got["glare"].is_null(),
+                !flags.contains(&"--glare"),
+                "{query}"
+            );
+            let r = server.get(&format!("/api/frame?{query}"));
+            assert_eq!(r.status, 200, "{query}: {}", r.text());
+            assert_eq!(&decode_png(&r.body), png, "round {round}: {query}");
+            let local = query.contains("adaptation=local");
+            let glare = query.contains("glare=1");
+            assert_eq!(
+                r.showing.contains("local adaptation"),
+                local,
+                "{}",
+                r.showing
+            );
+            assert_eq!(
+                r.showing.contains("global adaptation"),
+                !local,
+                "{}",
+                r.showing
+            );
+            assert_eq!(r.showing.contains("veiling glare"), glare, "{}", r.showing);
+            assert_eq!(r.showing.contains("no glare"), !glare, "{}", r.showing);
+        }
+    }
+    // The four settings at moonlight give four different pictures.
+    for i in 0..4 {
+        for j in i + 1..4 {
+            assert!(max_diff(&expected[i].1, &expected[j].1) > 10, "{i} vs {j}");
+        }
+    }
+    // The plain exposure is a camera's: the same whatever the observer's glare and
+    // adaptation.
+    let plain = server.get("/api/frame?peak=0.04&mode=exposure&width=100");
+    let both = server.get("/api/frame?peak=0.04&mode=exposure&width=100&glare=1&adaptation=local");
+    assert_eq!(plain.body, both.body);
+    assert!(
+        both.showing.starts_with("plain exposure"),
+        "{}",
+        both.showing
+    );
+}
+
+/// The flags set where the page starts: `serve --glare --adaptation local` is `map
+/// --glare --adaptation local`, and the API switches both off again.
+#[test]
+fn glare_and_local_flags_set_the_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = chart(dir.path());
+    let flags = [
+        "--peak",
+        "0.04",
+        "--glare",
+        "--age",
+        "70",
+        "--adaptation",
+        "local",
+        "--adaptation-radius",
+        "2",
+    ];
+    let server = Server::start(&image, &flags);
+    let (report, png) = map(&image, &flags, dir.path());
+    assert_eq!(server.json("/api/report"), report);
+    assert_eq!(report["glare"]["age_years"], 70.0);
+    assert_eq!(report["local"]["radius_deg"], 2.0);
+    assert_eq!(server.png("/api/frame"), png);
+    let (plain, plain_png) = map(&image, &["--peak", "0.04"], dir.path());
+    assert_eq!(server.json("/api/report?glare=0&adaptation=global"), plain);
+    assert_eq!(
+        server.png("/api/frame?glare=0&adaptation=global"),
+        plain_png
+    );
+}
+
+/// A preview with glare and local adaptation is the library's own: the retinal image of
+/// the full-resolution scene (`operator::prepare`), box-averaged to the preview
+/// (`preview::downsample_into`), its local adaptation map made at the preview's pixels
+/// (`preview::report_at_width`, `operator::local_map`) and mapped (`local::apply_into`).
+/// Tolerance: none, the same code values.
+#[test]
+fn previews_with_glare_and_local_adaptation_are_the_librarys() {
+    use visadapt::operator::{self, AdaptationMode, ViewingConditions};
+    use visadapt::{glare::Glare, local, preview};
+    let dir = tempfile::tempdir().unwrap();
+    let image = chart(dir.path());
+    let server = Server::start(&image, &["--fov", "6.7173"]);
+    let scene = visadapt::io::read(&image, &visadapt::Limits::default()).unwrap();
+    let (w, h) = (scene.width, scene.height);
+    for (peak, glare, adaptation) in [
+        (0.04, true, true),
+        (0.04, false, true),
+        (0.04, true, false),
+        (20.0, true, true),
     ] {
-        let out = visadapt()
-            .arg("serve")
-            .arg(&image)
-            .args(["--port", "0", "--no-open"])
-            .args(flags)
-            .output()
+        let conditions = ViewingConditions {
+            view: Some(visadapt::View::perspective(6.7173, w, h)),
+            glare: glare.then(Glare::default),
+            adaptation: if adaptation {
+                AdaptationMode::Local(local::LocalAdaptation::default())
+            } else {
+                AdaptationMode::Global
+            },
+            ..ViewingConditions::default()
+        };
+        let mut scaled = scene.clone();
+        let factor = scene
+            .peak_factor(peak, conditions.hot_pixel_fraction)
             .unwrap();
-        assert!(!out.status.success(), "{flags:?} was accepted");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(err.contains(named), "{flags:?}: {err}");
-        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        scaled.scale(factor as f32);
+        let (retina, report) = operator::prepare(&scaled, &conditions).unwrap();
+        let mut small = visadapt::HdrImage::zeros(0, 0);
+        preview::downsample_into(&retina, 200, &mut small).unwrap();
+        let small_report = preview::report_at_width(&report, 200);
+        let mut out = visadapt::DisplayImage::default();
+        match conditions.adaptation {
+            AdaptationMode::Local(options) => {
+                let map =
+                    operator::local_map(&small, &small_report, &conditions, &options).unwrap();
+                let mapping = local::LocalMapping::steady_state(&map, &small_report, true);
+                local::apply_into(&small, &map, &mapping, &mut out);
+            }
+            AdaptationMode::Global => {
+                operator::apply_into(&small, &small_report.mapping, &mut out);
+            }
+        }
+        let want = (
+            200,
+            small.height as u32,
+            visadapt::io::display::to_srgb8(&out),
+        );
+        let query = format!(
+            "/api/frame?peak={peak}&width=200&glare={}&adaptation={}",
+            u8::from(glare),
+            if adaptation { "local" } else { "global" }
+        );
+        let got = server.png(&query);
+        assert_eq!(max_diff(&got, &want), 0, "{query}");
+        // The preview shows the full frame's picture: its mean code value within a few
+        // percent (the box average and the sRGB curve shift it a little).
+        let full = server.png(&query.replace("&width=200", ""));
+        let (a, b) = (mean(&full.2), mean(&got.2));
+        assert!((a - b).abs() < 0.04 * a, "{query}: full {a}, preview {b}");
+    }
+}
+
+/// The pixel inspector under local adaptation reads the thresholds at the pixel's own
+/// adaptation (the library's map of the full scene), and under glare the luminance that
+/// reaches the retina there.
+#[test]
+fn pixel_reads_local_thresholds_and_the_veil() {
+    use visadapt::operator::{self, ViewingConditions};
+    use visadapt::visibility::Sensitivity;
+    use visadapt::{glare::Glare, local, preview};
+    let dir = tempfile::tempdir().unwrap();
+    let image = chart(dir.path());
+    let server = Server::start(&image, &["--fov", "6.7173"]);
+    let scene = visadapt::io::read(&image, &visadapt::Limits::default()).unwrap();
+    let w = scene.width;
+    let conditions = ViewingConditions {
+        view: Some(visadapt::View::perspective(6.7173, w, scene.height)),
+        ..ViewingConditions::default()
+    };
+    let mut scaled = scene.clone();
+    scaled.scale(
+        scene
+            .peak_factor(0.04, conditions.hot_pixel_fraction)
+            .unwrap() as f32,
+    );
+    let report = operator::plan(&scaled, &conditions).unwrap();
+    let map = operator::local_map(
+        &scaled,
+        &report,
+        &conditions,
+        &local::LocalAdaptation::default(),
+    )
+    .unwrap();
+    let mut differ = 0;
+    for (x, y) in [(100usize, 700usize), (400, 300), (700, 100)] {
+        let want = preview::probe(
+            &scaled,
+            x,
+            y,
+            &Sensitivity::local(&map, y * w + x, None),
+            0.3,
+        )
+        .unwrap();
+        let p = server.json(&format!(
+            "/api/pixel?peak=0.04&x={x}&y={y}&change=0.3&adaptation=local"
+        ));
+        let t = p["threshold_cd_m2"].as_f64().unwrap();
+        assert!(
+            (t - want.threshold_cd_m2).abs() <= 1e-9 * t,
+            "({x}, {y}): {t} vs {want:?}"
+        );
+        let jnd = p["change_jnd"].as_f64().unwrap();
+        assert!(
+            (jnd - want.change_jnd).abs() <= 1e-9 * jnd,
+            "({x}, {y}): {jnd}"
+        );
+        assert_eq!(p["retinal_cd_m2"], p["luminance_cd_m2"]);
+        let g = server.json(&format!("/api/pixel?peak=0.04&x={x}&y={y}&change=0.3"));
+        let tg = g["threshold_cd_m2"].as_f64().unwrap();
+        differ += usize::from((t / tg - 1.0).abs() > 0.01);
+    }
+    // The local thresholds are not the global one.
+    assert!(differ >= 1, "{differ}");
+    let global = server.json("/api/pixel?peak=0.04&x=100&y=700&change=0.3");
+    // With glare the eye's scatter moves light (a bright pixel loses some to its halo, a
+    // dark one gains); the scene's own luminance stays.
+    let veiled = server.json("/api/pixel?peak=0.04&x=100&y=700&change=0.3&glare=1");
+    assert_eq!(veiled["luminance_cd_m2"], global["luminance_cd_m2"]);
+    let (l, r) = (
+        veiled["luminance_cd_m2"].as_f64().unwrap(),
+        veiled["retinal_cd_m2"].as_f64().unwrap(),
+    );
+    assert!((r - l).abs() > 0.01 * l, "retinal {r} vs scene {l}");
+    let (retina, _) = operator::prepare(
+        &scaled,
+        &ViewingConditions {
+            glare: Some(Glare::default()),
+            ..conditions
+        },
+    )
+    .unwrap();
+    let want = f64::from(retina.y[700 * w + 100]);
+    assert!((r - want).abs() <= 1e-6 * want, "{r} vs {want}");
+}
+
+/// A time course with glare and local adaptation: the frames are `sequence`'s with the
+/// same flags, to one code value (one step of t seconds against steps of 60 and 150).
+#[test]
+fn time_course_with_glare_and_local_adaptation_is_the_sequence() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = chart(dir.path());
+    let server = Server::start(&image, &[]);
+    let frames = dir.path().join("frames");
+    visadapt()
+        .arg("sequence")
+        .arg(&image)
+        .args(["--from", "1412", "--to", "0.1", "--times", "60,210"])
+        .args(["--glare", "--adaptation", "local", "-o"])
+        .arg(&frames)
+        .assert()
+        .success();
+    let mut names = common::files_in(&frames);
+    names.sort();
+    assert_eq!(names.len(), 3, "{names:?}");
+    for (t, name) in [(60.0, &names[1]), (210.0, &names[2])] {
+        let q = format!("peak=0.1&from=1412&t={t}&glare=1&adaptation=local");
+        let frame = server.png(&format!("/api/frame?{q}"));
+        let expected = decode_png(&std::fs::read(frames.join(name)).unwrap());
+        assert!(max_diff(&frame, &expected) <= 1, "t = {t}");
+        // The tolerance tells the settings apart: the global frame without glare is not
+        // within it.
+        let global = server.png(&format!("/api/frame?peak=0.1&from=1412&t={t}"));
+        let d = max_diff(&global, &expected);
+        assert!(
+            d > 1,
+            "t = {t}: the global frame is within {d} of the sequence's"
+        );
     }
 }

@@ -11,6 +11,9 @@
 //! * [`mapping_at_width`] rescales the acuity Gaussian of Eq. 7 from full-resolution pixels to preview pixels
 //!   (the same angle, fewer pixels per degree), with the operator's
 //!   [`MIN_BLUR_SIGMA_PX`] rule;
+//! * [`report_at_width`] takes the report's pixel measures (size, pixels per degree, the
+//!   acuity Gaussian) to the preview's, for the stages that read them, such as the local
+//!   adaptation map;
 //! * [`exposure`] is a plain camera exposure (the highest visible luminance at the display
 //!   maximum, colours kept, no rods, no blur): the reference an A/B split compares the
 //!   model with, a project choice, not part of the paper;
@@ -109,6 +112,27 @@ pub fn mapping_at_width(mapping: &Mapping, full_width: usize, width: usize) -> M
             0.0
         },
         ..*mapping
+    }
+}
+
+/// The [`operator::plan`](crate::operator::plan) report of an image, for a copy of it
+/// `width` pixels wide ([`downsample_into`]): the same adaptation, thresholds, scales and
+/// `k` (planned once at full resolution), with what is measured in pixels taken to the
+/// preview's: its size ([`preview_size`]), the pixels per degree of the view at that
+/// width, and the acuity Gaussian of [`mapping_at_width`]. The stages that work in pixels
+/// from a report, such as the local adaptation map
+/// ([`operator::local_map`](crate::operator::local_map), whose per-pixel Eq. 7 sigmas
+/// come from the report's pixels per degree), then work at the preview's scale.
+pub fn report_at_width(report: &Report, width: usize) -> Report {
+    let (w, h) = preview_size(report.width, report.height, width);
+    Report {
+        width: w,
+        height: h,
+        pixels_per_degree: report
+            .pixels_per_degree
+            .and(report.view.pixels_per_degree(w)),
+        mapping: mapping_at_width(&report.mapping, report.width, w),
+        ..report.clone()
     }
 }
 
@@ -305,6 +329,43 @@ mod tests {
         assert_eq!(mapping_at_width(&m, 400, 100).blur_sigma_px, 0.75);
         // 3 px at 1/100 of the width is 0.03 px, under MIN_BLUR_SIGMA_PX: no blur.
         assert_eq!(mapping_at_width(&m, 400, 4).blur_sigma_px, 0.0);
+    }
+
+    /// The local adaptation map of a preview, from the full-resolution report taken to the
+    /// preview's width, has the acuity Gaussian of the preview's pixels: on a uniform scene
+    /// (every offset 0) each pixel's sigma is the global one at that width, a quarter of
+    /// the full image's here.
+    #[test]
+    fn report_at_width_puts_the_local_acuity_in_preview_pixels() {
+        let mut img = HdrImage::zeros(400, 200);
+        for i in 0..img.len() {
+            (img.x[i], img.y[i], img.z[i]) = (0.950_456 * 0.04, 0.04, 1.089_058 * 0.04);
+        }
+        let conditions = ViewingConditions {
+            view: Some(crate::View::perspective(4.0, 400, 200)),
+            ..ViewingConditions::default()
+        };
+        let report = operator::plan(&img, &conditions).unwrap();
+        let full_sigma = report.mapping.blur_sigma_px;
+        assert!(full_sigma > 2.0, "{full_sigma}");
+        let small = report_at_width(&report, 100);
+        assert_eq!((small.width, small.height), (100, 50));
+        assert!((small.mapping.blur_sigma_px - full_sigma / 4.0).abs() < 1e-12 * full_sigma);
+        let ppd = report.pixels_per_degree.unwrap();
+        assert!((small.pixels_per_degree.unwrap() - ppd / 4.0).abs() < 1e-12 * ppd);
+        assert_eq!(small.world_adaptation_cd_m2, report.world_adaptation_cd_m2);
+        let mut preview = HdrImage::zeros(0, 0);
+        downsample_into(&img, 100, &mut preview).unwrap();
+        let options = crate::local::LocalAdaptation::default();
+        let map = operator::local_map(&preview, &small, &conditions, &options).unwrap();
+        let sigmas = map.acuity_sigma_px.unwrap();
+        for s in sigmas {
+            let s = f64::from(s);
+            assert!(
+                (s - full_sigma / 4.0).abs() < 1e-5 * full_sigma,
+                "{s} vs {full_sigma}"
+            );
+        }
     }
 
     #[test]

@@ -163,6 +163,33 @@ impl Sensitivity {
         }
     }
 
+    /// The thresholds at pixel `i` of a local adaptation map ([`operator::local_map`]):
+    /// Eq. 4-6 at the pixel's own photopic and scotopic adaptation; during a time course
+    /// (`state`, stepped to the frame's global world adaptation), each threshold raised by
+    /// the state's current log excess, the same for every pixel: the rule of
+    /// [`crate::local`]'s time course (a global state plus local offsets), with `k` at the
+    /// pixel's scotopic adaptation as [`LocalMapping::for_time_course`](crate::local::LocalMapping::for_time_course)
+    /// maps it. At a pixel whose offsets are 0 this is [`Sensitivity::steady_state`] of the
+    /// map's global levels, or (floors aside) [`Sensitivity::from_time_course`].
+    ///
+    /// # Panics
+    /// If `i` is outside the map.
+    pub fn local(
+        map: &AdaptationMap,
+        i: usize,
+        state: Option<&crate::timecourse::Adaptation>,
+    ) -> Self {
+        let (la, las) = (map.adaptation_cd_m2(i), map.adaptation_scotopic_cd_m2(i));
+        let steady = Sensitivity::steady_state(la, las);
+        let Some(state) = state else { return steady };
+        Sensitivity {
+            cone_threshold_cd_m2: steady.cone_threshold_cd_m2 * 10f64.powf(state.cone_excess_log()),
+            rod_threshold_scotopic_cd_m2: steady.rod_threshold_scotopic_cd_m2
+                * 10f64.powf(state.rod_excess_log()),
+            rod_weight: steady.rod_weight,
+        }
+    }
+
     /// Check that both thresholds are positive and at most `f32::MAX` (the range of the
     /// planes they divide; an image's own adaptation can reach it, e.g. values of 1e38
     /// cd/m²) and `k` is in [0, 1].
@@ -854,6 +881,66 @@ mod tests {
         // No overflow for huge signals.
         assert!((pool(1e300, 1e300) / 1e300 - 1.219_0).abs() < 1e-4);
         assert!(pool_f32(1e30, 2e30).is_finite());
+    }
+
+    /// Per pixel, the local thresholds are Eq. 4-6 at the pixel's own levels; during a time
+    /// course they are raised by the state's excess, so that at the global level they are
+    /// the time course's own thresholds.
+    #[test]
+    fn local_thresholds_follow_each_pixels_adaptation() {
+        // Pixel 0 at the map's anchor (offset 0), pixel 1 a hundred times darker.
+        let map = AdaptationMap::from_levels(2, 1, &[10.0, 0.1], &[22.61, 0.2261]).unwrap();
+        // (The map holds its levels as f32: relative errors of 1e-7.)
+        let rel = |a: f64, b: f64| (a / b - 1.0).abs();
+        let s0 = Sensitivity::local(&map, 0, None);
+        let want = Sensitivity::steady_state(10.0, 22.61);
+        assert!(
+            rel(s0.cone_threshold_cd_m2, want.cone_threshold_cd_m2) < 1e-6,
+            "{s0:?}"
+        );
+        assert!(
+            rel(
+                s0.rod_threshold_scotopic_cd_m2,
+                want.rod_threshold_scotopic_cd_m2
+            ) < 1e-6
+        );
+        assert_eq!(s0.rod_weight, want.rod_weight);
+        let s1 = Sensitivity::local(&map, 1, None);
+        let want = Sensitivity::steady_state(0.1, 0.2261);
+        assert!(
+            rel(s1.cone_threshold_cd_m2, want.cone_threshold_cd_m2) < 1e-6,
+            "{s1:?}"
+        );
+        assert!(
+            rel(
+                s1.rod_threshold_scotopic_cd_m2,
+                want.rod_threshold_scotopic_cd_m2
+            ) < 1e-6
+        );
+        assert!((s1.rod_weight - want.rod_weight).abs() < 1e-6);
+        // Eq. 4 at 10 and 0.1 cd/m²: 1.07 and 0.232 cd/m².
+        assert!(s1.cone_threshold_cd_m2 < 0.25 * s0.cone_threshold_cd_m2);
+        // Lights switched from 1000 to 10 cd/m² 20 s ago: the thresholds are still raised.
+        let mut eye = crate::timecourse::Adaptation::adapted(1000.0, 2261.0).unwrap();
+        eye.step(0.0, 10.0, 22.61).unwrap();
+        eye.step(20.0, 10.0, 22.61).unwrap();
+        assert!(eye.cone_excess_log() > 0.1, "{}", eye.cone_excess_log());
+        let t0 = Sensitivity::local(&map, 0, Some(&eye));
+        let global = Sensitivity::from_time_course(&eye);
+        assert!(
+            rel(t0.cone_threshold_cd_m2, global.cone_threshold_cd_m2) < 1e-6,
+            "{t0:?}"
+        );
+        assert!(
+            rel(
+                t0.rod_threshold_scotopic_cd_m2,
+                global.rod_threshold_scotopic_cd_m2
+            ) < 1e-6
+        );
+        assert_eq!(t0.rod_weight, global.rod_weight);
+        let t1 = Sensitivity::local(&map, 1, Some(&eye));
+        let raised = 10f64.powf(eye.cone_excess_log());
+        assert!(rel(t1.cone_threshold_cd_m2, s1.cone_threshold_cd_m2 * raised) < 1e-9);
     }
 
     #[test]

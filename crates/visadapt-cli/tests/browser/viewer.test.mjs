@@ -161,3 +161,78 @@ test("the time course plays and the clock runs", async () => {
   assert.match(await reportText(page), /rod threshold now/);
   await page.close();
 });
+
+// Keep the frame's sRGB code values as the page shows them under `name` (in the page).
+function keep(page, name) {
+  return page.evaluate((name) => {
+    const img = document.getElementById("frame");
+    const c = document.createElement("canvas");
+    c.width = img.naturalWidth;
+    c.height = img.naturalHeight;
+    const g = c.getContext("2d");
+    g.drawImage(img, 0, 0);
+    window.kept = window.kept || {};
+    window.kept[name] = g.getImageData(0, 0, c.width, c.height).data;
+  }, name);
+}
+
+// Fraction of the colour samples (alpha left out) of two kept frames that differ by more
+// than two code values.
+function changed(page, a, b) {
+  return page.evaluate(([a, b]) => {
+    const [x, y] = [window.kept[a], window.kept[b]];
+    if (x.length !== y.length) return 1;
+    let n = 0;
+    for (let i = 0; i < x.length; i++) if (i % 4 !== 3 && Math.abs(x[i] - y[i]) > 2) n++;
+    return n / ((x.length * 3) / 4);
+  }, [a, b]);
+}
+
+test("glare and local adaptation switch on and off, and the status line says so", async () => {
+  const page = await context.newPage();
+  const errors = [];
+  page.on("response", (r) => {
+    if (r.status() >= 400) errors.push(r.status() + " " + r.url());
+  });
+  page.on("pageerror", (e) => errors.push(e.message));
+  await page.goto(url);
+  let [frames, reports] = await settled(page, 0, 0);
+  // Moonlight (Fig. 11c): the level where both matter.
+  await page.locator("#level").fill("-1.4");
+  [frames, reports] = await settled(page, frames, reports);
+  const showing = () => page.locator("#showing").innerText();
+  assert.match(await showing(), /global adaptation/);
+  assert.match(await showing(), /no glare/);
+  assert.equal(await page.locator("#glare").isChecked(), false);
+  assert.equal(await page.locator("#adaptation").inputValue(), "global");
+  await keep(page, "plain");
+
+  await page.locator("#glare").check();
+  [frames, reports] = await settled(page, frames, reports);
+  assert.match(await showing(), /veiling glare/);
+  assert.match(await showing(), /global adaptation/);
+  assert.match(await reportText(page), /veiling glare/);
+  await keep(page, "glare");
+  const byGlare = await changed(page, "plain", "glare");
+  assert.ok(byGlare > 0.01, "glare changed " + byGlare + " of the samples");
+
+  await page.locator("#adaptation").selectOption("local");
+  [frames, reports] = await settled(page, frames, reports);
+  assert.match(await showing(), /local adaptation/);
+  assert.match(await showing(), /veiling glare/);
+  assert.match(await reportText(page), /local adaptation/);
+  await keep(page, "both");
+  const byLocal = await changed(page, "glare", "both");
+  assert.ok(byLocal > 0.01, "local adaptation changed " + byLocal + " of the samples");
+
+  // Both off again: the first picture, exactly (no cached result of another setting).
+  await page.locator("#glare").uncheck();
+  await page.locator("#adaptation").selectOption("global");
+  [frames, reports] = await settled(page, frames, reports);
+  assert.match(await showing(), /global adaptation.*, no glare/);
+  assert.doesNotMatch(await reportText(page), /veiling glare|local adaptation/);
+  await keep(page, "again");
+  assert.equal(await changed(page, "plain", "again"), 0);
+  assert.deepEqual(errors, []);
+  await page.close();
+});

@@ -1,7 +1,8 @@
 //! The HTTP side: routes, query parameters and their one-line errors.
 //!
-//! `GET /` the page; `GET /api/frame?...` a PNG; `GET /api/report?...` the JSON of
-//! `map --json`; `GET /api/pixel?x=&y=&...` one pixel. Every parameter is checked here
+//! `GET /` the page; `GET /api/frame?...` a PNG (its `x-visadapt-showing` header says
+//! which adaptation and glare it shows); `GET /api/report?...` the JSON of `map --json`;
+//! `GET /api/pixel?x=&y=&...` one pixel. Every parameter is checked here
 //! (unknown, repeated, malformed or out of range: HTTP 400 with one line saying which and
 //! why); the work runs on a blocking thread, one request at a time, against the shared
 //! [`Viewer`].
@@ -19,7 +20,7 @@ const SCRIPT: &str = include_str!("page/viewer.js");
 const STYLE: &str = include_str!("page/viewer.css");
 
 /// Query parameters of a frame or report.
-const FRAME_KEYS: [&str; 8] = [
+const FRAME_KEYS: [&str; 10] = [
     "peak",
     "t",
     "from",
@@ -28,9 +29,14 @@ const FRAME_KEYS: [&str; 8] = [
     "acuity",
     "width",
     "mode",
+    "glare",
+    "adaptation",
 ];
 /// Extra parameters of `/api/pixel`.
 const PIXEL_KEYS: [&str; 3] = ["x", "y", "change"];
+
+/// The response header of `/api/frame` that says what the frame shows (adaptation, glare).
+pub const SHOWING_HEADER: &str = "x-visadapt-showing";
 
 /// The relative change `/api/pixel` asks about when `change` is not given: 10 %.
 const DEFAULT_CHANGE: f64 = 0.1;
@@ -96,8 +102,22 @@ fn page(body: &'static str, content_type: &'static str) -> Response {
 async fn frame(State(viewer): State<Shared>, RawQuery(query): RawQuery) -> Response {
     run(viewer, move |v| {
         let q = Query::parse(query.as_deref(), &FRAME_KEYS)?;
-        let png = v.frame_png(&q.params(v)?)?;
-        Ok(([(header::CONTENT_TYPE, "image/png")], png).into_response())
+        let params = q.params(v)?;
+        let png = v.frame_png(&params)?;
+        // What the frame shows, for the page's status line (plain ASCII).
+        let showing = header::HeaderValue::from_str(&v.showing(&params))
+            .map_err(|e| Failure::Internal(format!("the status line: {e}")))?;
+        Ok((
+            [
+                (
+                    header::CONTENT_TYPE,
+                    header::HeaderValue::from_static("image/png"),
+                ),
+                (header::HeaderName::from_static(SHOWING_HEADER), showing),
+            ],
+            png,
+        )
+            .into_response())
     })
     .await
 }
@@ -266,13 +286,26 @@ impl Query {
                 ))
             }
         })?;
-        let acuity = self
-            .get("acuity", |s| match s {
+        let switch_of = |name: &'static str| {
+            move |s: &str| match s {
                 "1" | "true" => Ok(true),
                 "0" | "false" => Ok(false),
-                _ => Err(format!("invalid acuity {s:?}: must be 0 or 1")),
-            })?
+                _ => Err(format!("invalid {name} {s:?}: must be 0 or 1")),
+            }
+        };
+        let acuity = self
+            .get("acuity", switch_of("acuity"))?
             .unwrap_or(v.defaults.acuity);
+        let glare = self
+            .get("glare", switch_of("glare"))?
+            .unwrap_or(v.defaults.glare);
+        let local = self
+            .get("adaptation", |s| match s {
+                "global" => Ok(false),
+                "local" => Ok(true),
+                _ => Err(format!("invalid adaptation {s:?}: must be global or local")),
+            })?
+            .unwrap_or(v.defaults.local);
         let width = self.get("width", |s| {
             let w: usize = s
                 .parse()
@@ -301,6 +334,8 @@ impl Query {
             acuity,
             width,
             rendering,
+            glare,
+            local,
         })
     }
 }

@@ -12,18 +12,18 @@ use std::sync::{Arc, Mutex};
 use visadapt::io;
 
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
-    if args.viewing.glare.glare {
-        anyhow::bail!(
-            "--glare: the viewer does not show veiling glare yet (use map, sequence or video)"
-        );
-    }
-    // The viewer plans and maps every frame with the global mapping; taking
-    // `--adaptation local` and showing the global picture would mislead.
-    if args.viewing.adaptation.adaptation == crate::cli::AdaptationKind::Local {
-        anyhow::bail!(
-            "--adaptation local: the viewer does not show local adaptation yet (use map, sequence or video)"
-        );
-    }
+    // The page switches glare and local adaptation on and off; the flags set how it
+    // starts and the observer's options (age, pigmentation, radius) for both.
+    let glare = visadapt::glare::Glare {
+        age_years: args.viewing.glare.age,
+        pigmentation: args.viewing.glare.pigmentation,
+    };
+    glare.validate()?;
+    let local = visadapt::local::LocalAdaptation {
+        radius_deg: args.viewing.adaptation.adaptation_radius,
+        ..Default::default()
+    };
+    local.validate()?;
     let conditions = args.viewing.conditions(
         Some(&args.display),
         None,
@@ -45,8 +45,21 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         display_max_cd_m2: conditions.display_max_cd_m2,
         view: args.view.view(width, height),
         acuity: conditions.acuity,
+        glare: conditions.glare.is_some(),
+        local: matches!(
+            conditions.adaptation,
+            visadapt::operator::AdaptationMode::Local(_)
+        ),
     };
-    let viewer = viewer::Viewer::new(args.input.clone(), image, scale, conditions, defaults);
+    let viewer = viewer::Viewer::new(
+        args.input.clone(),
+        image,
+        scale,
+        conditions,
+        defaults,
+        glare,
+        local,
+    );
 
     // Two workers are plenty for one user's page; the model's own parallelism is rayon's.
     let runtime = tokio::runtime::Builder::new_multi_thread()

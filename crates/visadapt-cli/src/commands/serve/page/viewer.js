@@ -39,6 +39,11 @@ function query(extra) {
   const fov = $("fov").value.trim();
   if (fov !== "") p.set("fov", fov);
   p.set("acuity", $("acuity").checked ? "1" : "0");
+  // Until the first report the server's flags (--glare, --adaptation) set these.
+  if (state.nativeLevel !== null) {
+    p.set("glare", $("glare").checked ? "1" : "0");
+    p.set("adaptation", $("adaptation").value);
+  }
   if ($("timecourse").checked) {
     p.set("from", String(Number($("from").value)));
     p.set("t", String(Number($("t").value)));
@@ -99,8 +104,10 @@ async function fetchOk(url) {
   return r;
 }
 
+// Load a frame into `img`; returns what the server says the frame shows.
 async function loadImage(img, url) {
   const r = await fetchOk(url);
+  const showing = r.headers.get("x-visadapt-showing") || "";
   const blob = await r.blob();
   const src = URL.createObjectURL(blob);
   await new Promise((resolve, reject) => {
@@ -110,12 +117,14 @@ async function loadImage(img, url) {
   });
   if (img.dataset.url) URL.revokeObjectURL(img.dataset.url);
   img.dataset.url = src;
+  return showing;
 }
 
 const frames = channel(async () => {
   const started = performance.now();
   const q = query({ width: previewWidth() });
-  await loadImage($("frame"), "/api/frame?" + q);
+  const showing = await loadImage($("frame"), "/api/frame?" + q);
+  $("showing").textContent = "showing: " + showing;
   if ($("split").checked) {
     await loadImage($("exposure"), "/api/frame?" + query({ width: previewWidth(), mode: "exposure" }));
   }
@@ -192,10 +201,23 @@ function showReport(r) {
   }
   row(tb, "acuity blur", r.acuity_applied ? (r.blur_sigma_px > 0 ? "σ " + fmt(r.blur_sigma_px, "px") : "below a pixel") : "off");
   row(tb, "view", r.view.projection + " " + fmt(r.view.horizontal_fov_deg, "°") + " (" + r.view.source + ")");
+  if (r.glare) {
+    const g = r.glare;
+    row(tb, "veiling glare", fmt(g.veil_at_fixation_cd_m2, "cd/m²") + " at the centre, " + fmt(100 * g.scattered_fraction) + " % scattered");
+    row(tb, "adaptation with / without glare", "× " + g.adaptation_ratio.toFixed(3) + " (without: " + fmt(g.adaptation_without_glare_cd_m2, "cd/m²") + ")");
+  }
+  if (r.local) {
+    const a = r.local.adaptation_cd_m2;
+    const k = r.local.rod_weight;
+    row(tb, "local adaptation (" + fmt(r.local.radius_deg, "°") + ")", fmt(a.p10) + " to " + fmt(a.p90, "cd/m²") + " (10-90 %)");
+    row(tb, "local k (Eq. 6)", k.p10.toFixed(3) + " to " + k.p90.toFixed(3));
+  }
   row(tb, "display", fmt(r.display_max_cd_m2, "cd/m²") + ", clipped " + r.pixels_clipped + " px");
   if (state.nativeLevel === null) {
     // First report: the server's view and the file's own level set the controls.
     $("fov").placeholder = fmt(r.view.horizontal_fov_deg) + " (" + r.view.source + ")";
+    $("glare").checked = r.glare !== null;
+    $("adaptation").value = r.adaptation;
     const l = Math.log10(r.highest_visible_cd_m2);
     $("level").value = String(Number.isFinite(l) ? l : 2);
     state.nativeLevel = Number($("level").value);
@@ -209,6 +231,7 @@ function showPixel(p) {
   tb.replaceChildren();
   row(tb, "pixel", p.x + ", " + p.y);
   row(tb, "world", fmt(p.luminance_cd_m2, "cd/m²") + ", " + fmt(p.scotopic_cd_m2, "scotopic cd/m²"));
+  if (p.retinal_cd_m2 !== p.luminance_cd_m2) row(tb, "with the veil", fmt(p.retinal_cd_m2, "cd/m²"));
   row(tb, "displayed", fmt(p.display.luminance_cd_m2, "cd/m²") + ", sRGB " + p.display.srgb8.join(" "));
   row(tb, "smallest visible change", fmt(p.threshold_cd_m2, "cd/m²"));
   row(tb, "a " + fmt(p.change * 100) + " % change", fmt(p.change_jnd) + " JND: " + (p.change_visible ? "visible" : "invisible"));
@@ -280,7 +303,7 @@ function preset(name) {
 }
 
 function init() {
-  for (const id of ["level", "display-max", "fov", "acuity", "from", "t", "timecourse"]) {
+  for (const id of ["level", "display-max", "fov", "acuity", "glare", "adaptation", "from", "t", "timecourse"]) {
     $(id).addEventListener("input", () => {
       if (id === "timecourse") setTimecourse();
       refresh();
