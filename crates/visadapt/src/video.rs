@@ -502,42 +502,20 @@ where
         drop(free_display);
         drop(mapped);
 
-        // The operator, on this thread, in frame order.
-        let mut made_display = 0;
-        let operated = (|| {
-            loop {
-                let frame = starved.time(|| decoded.recv());
-                let Ok(frame) = frame else {
-                    return Ok(()); // every frame has been read
-                };
-                let (index, mut hdr) = frame?;
-                let mut display = match reused_display.try_recv() {
-                    Ok(d) => d,
-                    Err(_) if made_display <= encoders => {
-                        made_display += 1;
-                        DisplayImage::default()
-                    }
-                    Err(_) => match blocked.time(|| reused_display.recv()) {
-                        Ok(d) => d,
-                        Err(_) => return Ok(()), // the encoders stopped at an error
-                    },
-                };
-                let out = operating.time(|| map(index, &mut hdr, &mut display))?;
-                // Back to the decoders for a later frame (if they have finished, dropped).
-                let _ = free_hdr.send(hdr);
-                if blocked
-                    .time(|| to_encoders.send((index, display, out)))
-                    .is_err()
-                {
-                    return Ok(()); // the encoders stopped at an error, which they report
-                }
-            }
-        })();
-        // Nothing more for the encoders (they finish the frames they have) or from the
+        // The operator, on this thread, in frame order. Its end drops the channels:
+        // nothing more for the encoders (they finish the frames they have) or from the
         // decoders (they stop).
-        drop(to_encoders);
-        drop(decoded);
-        drop(free_hdr);
+        let operated = operate(
+            Stages {
+                decoded,
+                free_hdr,
+                to_encoders,
+                reused_display,
+                encoders,
+            },
+            &mut map,
+            [operating, starved, blocked],
+        );
         halt(0);
         operated
     });
@@ -560,6 +538,66 @@ where
         encoding,
         writing,
     })
+}
+
+/// The operator's ends of the pipeline's channels.
+struct Stages<E, T> {
+    /// Decoded frames, in order.
+    decoded: mpsc::Receiver<Decoded<E>>,
+    /// HDR images back to the decoders.
+    free_hdr: mpsc::Sender<HdrImage>,
+    /// Mapped frames to the encoders.
+    to_encoders: mpsc::SyncSender<(u64, DisplayImage, T)>,
+    /// Display images back from the encoders.
+    reused_display: mpsc::Receiver<DisplayImage>,
+    /// Encoder threads (one display image each, and one for the operator).
+    encoders: usize,
+}
+
+/// The operator stage of [`run`]: every decoded frame, in order, through `map` into a
+/// display image (reused, or one of at most `encoders + 1`), handed to an encoder. Ends
+/// at the end of the frames, at the first error (returned), or when the encoders stop
+/// (their error is theirs to report). `[operating, starved, blocked]` time the map and
+/// the waits.
+fn operate<E, T, F>(stages: Stages<E, T>, map: &mut F, clocks: [&Clock; 3]) -> Result<(), E>
+where
+    F: FnMut(u64, &mut HdrImage, &mut DisplayImage) -> Result<T, E>,
+{
+    let [operating, starved, blocked] = clocks;
+    let Stages {
+        decoded,
+        free_hdr,
+        to_encoders,
+        reused_display,
+        encoders,
+    } = stages;
+    let mut made_display = 0;
+    loop {
+        let Ok(frame) = starved.time(|| decoded.recv()) else {
+            return Ok(()); // every frame has been read
+        };
+        let (index, mut hdr) = frame?;
+        let mut display = match reused_display.try_recv() {
+            Ok(d) => d,
+            Err(_) if made_display <= encoders => {
+                made_display += 1;
+                DisplayImage::default()
+            }
+            Err(_) => match blocked.time(|| reused_display.recv()) {
+                Ok(d) => d,
+                Err(_) => return Ok(()), // the encoders stopped at an error
+            },
+        };
+        let out = operating.time(|| map(index, &mut hdr, &mut display))?;
+        // Back to the decoders for a later frame (if they have finished, dropped).
+        let _ = free_hdr.send(hdr);
+        if blocked
+            .time(|| to_encoders.send((index, display, out)))
+            .is_err()
+        {
+            return Ok(()); // the encoders stopped at an error, which they report
+        }
+    }
 }
 
 /// Numbered HDR files as a [`Source`]: frame `k` is `paths[k]`, read with

@@ -308,45 +308,46 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     };
     let mut eye: Option<Observer> = None;
     let mut warned_units = false;
-    let operator = |k: u64, hdr: &mut HdrImage, display: &mut DisplayImage| {
-        let (n, input) = frame_of(k);
-        let name = if input.as_os_str() == "-" {
-            STDIN.to_string()
-        } else {
-            input.display().to_string()
-        };
-        let what = || format!("frame {n} ({name})");
-        if scale.is_none() && !hdr.absolute_units && !warned_units {
-            log::warn!(
-                "{}: the {} does not say its units; values are taken as cd/m² (use --scale)",
-                what(),
-                if input.as_os_str() == "-" {
-                    "stream"
-                } else {
-                    "file"
-                }
-            );
-            warned_units = true;
-        }
-        let eye = match eye.as_mut() {
-            Some(eye) => eye,
-            None => {
-                // The view --fov gives is that of the first frame's size (all frames have it).
-                let conditions = ViewingConditions {
-                    view: args.view.view(hdr.width, hdr.height),
-                    ..conditions.clone()
-                };
-                super::warn_if_default_view(Path::new(&name), hdr, &conditions);
-                eye.insert(Observer::new(conditions, args.fps)?)
+    let operator =
+        |k: u64, hdr: &mut HdrImage, display: &mut DisplayImage| -> anyhow::Result<Mapped> {
+            let (n, input) = frame_of(k);
+            let name = if input.as_os_str() == "-" {
+                STDIN.to_string()
+            } else {
+                input.display().to_string()
+            };
+            let what = || format!("frame {n} ({name})");
+            if scale.is_none() && !hdr.absolute_units && !warned_units {
+                log::warn!(
+                    "{}: the {} does not say its units; values are taken as cd/m² (use --scale)",
+                    what(),
+                    if input.as_os_str() == "-" {
+                        "stream"
+                    } else {
+                        "file"
+                    }
+                );
+                warned_units = true;
             }
+            let eye = match eye.as_mut() {
+                Some(eye) => eye,
+                None => {
+                    // The view --fov gives is that of the first frame's size (all frames have it).
+                    let conditions = ViewingConditions {
+                        view: args.view.view(hdr.width, hdr.height),
+                        ..conditions.clone()
+                    };
+                    super::warn_if_default_view(Path::new(&name), hdr, &conditions);
+                    eye.insert(Observer::new(conditions, args.fps)?)
+                }
+            };
+            let frame = eye.frame(hdr, display).with_context(what)?;
+            let out = writer.sink.path(&input, n);
+            let json = args
+                .json
+                .then(|| json_line(n, &input, out.as_deref(), &frame));
+            Ok(Mapped { path: out, json })
         };
-        let frame = eye.frame(hdr, display).with_context(what)?;
-        let out = writer.sink.path(&input, n);
-        let json = args
-            .json
-            .then(|| json_line(n, &input, out.as_deref(), &frame));
-        Ok(Mapped { path: out, json })
-    };
     let threads = video::Threads {
         decoders: args.decoders.get(),
         encoders: args.encoders.get(),
