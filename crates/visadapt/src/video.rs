@@ -62,8 +62,8 @@
 //! }, &sink, Threads::default())?;
 //! assert_eq!(timings.frames, 30);
 //! let means = sink.0.into_inner().unwrap();
-//! // Just after the fall the eye, still light-adapted, sees almost nothing; two seconds
-//! // later it has begun to adapt to the dark and sees more.
+//! // Just after the fall the light-adapted eye shows the dark room dimmer than it will
+//! // (Eq. 8-9: a low m(t)); two seconds later it has begun to adapt and shows more.
 //! assert!(means[10] < means[29] && means[29] < means[9]);
 //! # Ok::<(), visadapt::Error>(())
 //! ```
