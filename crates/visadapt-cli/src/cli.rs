@@ -1097,6 +1097,13 @@ fn frame_size(s: &str) -> Result<(u64, u64), String> {
     Ok((side(w)?, side(h)?))
 }
 
+/// The library's default decoder and encoder threads for `video`.
+fn default_threads() -> (std::num::NonZeroUsize, std::num::NonZeroUsize) {
+    let t = visadapt::video::Threads::default();
+    let n = |v: usize| std::num::NonZeroUsize::new(v).unwrap_or(std::num::NonZeroUsize::MIN);
+    (n(t.decoders), n(t.encoders))
+}
+
 #[derive(Debug, Args)]
 pub struct VideoArgs {
     /// Input frames: a path whose file name holds one %d or %0Nd, e.g. frames/f_%04d.exr;
@@ -1151,6 +1158,21 @@ pub struct VideoArgs {
     /// Print one JSON object per frame (JSON Lines) on standard output as frames are written.
     #[arg(long)]
     pub json: bool,
+
+    /// Threads decoding frames at once (files only: a stream on standard input is read by
+    /// one).
+    #[arg(long, value_name = "N", default_value_t = default_threads().0)]
+    pub decoders: std::num::NonZeroUsize,
+
+    /// Threads encoding and writing frames at once (each frame is still written whole and
+    /// in order).
+    #[arg(long, value_name = "N", default_value_t = default_threads().1)]
+    pub encoders: std::num::NonZeroUsize,
+
+    /// At the end, print on standard error the frame rate and where the time went: each
+    /// stage's time per frame and how long the operator waited for frames and for encoders.
+    #[arg(long)]
+    pub timings: bool,
 }
 
 // ---- the viewer in the browser ----

@@ -182,6 +182,93 @@ fn raw_frames_have_the_codes_of_map_and_video_on_the_same_frames() {
     }
 }
 
+/// The pipeline's threads (`--decoders`, `--encoders`) change nothing in what is written:
+/// files and streams, byte for byte, in order; a damaged frame stops the video after the
+/// frames before it, whatever the threads; `--timings` reports the run on standard error.
+#[test]
+fn decoder_and_encoder_threads_write_the_same_frames_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = 9;
+    for k in 0..frames {
+        std::fs::write(dir.path().join(format!("f_{k}.pfm")), pfm(k % 4)).unwrap();
+    }
+    let pattern = dir.path().join("f_%d.pfm");
+    let run = |threads: [&str; 2], out: &Path| {
+        visadapt()
+            .arg("video")
+            .arg(&pattern)
+            .args(common_flags())
+            .args([
+                "--decoders",
+                threads[0],
+                "--encoders",
+                threads[1],
+                "--timings",
+            ])
+            .arg("-o")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let one = dir.path().join("one");
+    let out = run(["1", "1"], &one);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let names: Vec<String> = (0..frames).map(|k| format!("f_{k}.png")).collect();
+    assert_eq!(files_in(&one), names);
+    for threads in [["3", "1"], ["1", "3"], ["4", "4"]] {
+        let many = dir
+            .path()
+            .join(format!("many-{}-{}", threads[0], threads[1]));
+        let out = run(threads, &many);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("timings: 9 frames in ")
+                && err.contains(&format!("({} threads)", threads[0]))
+                && err.contains("frames/s"),
+            "{err}"
+        );
+        assert_eq!(files_in(&many), names);
+        for name in &names {
+            let same =
+                std::fs::read(many.join(name)).unwrap() == std::fs::read(one.join(name)).unwrap();
+            assert!(
+                same,
+                "{name} with {threads:?} threads differs from one thread each"
+            );
+        }
+    }
+    // Raw frames on standard output, several encoders: the same stream as one encoder.
+    let (ok, want, err) = video_stream(raw_stream(frames), &["-o", "-", "--format", "rgb24"]);
+    assert!(ok, "{}", String::from_utf8_lossy(&err));
+    let (ok, got, err) = video_stream(
+        raw_stream(frames),
+        &["-o", "-", "--format", "rgb24", "--encoders", "4"],
+    );
+    assert!(ok, "{}", String::from_utf8_lossy(&err));
+    assert!(got == want, "the stream differs with four encoders");
+    // A damaged frame 5: frames 0-4 are written, whole, nothing after, with many threads.
+    std::fs::write(dir.path().join("f_5.pfm"), b"PF\n64 48\n-1.0\ntruncated").unwrap();
+    let broken = dir.path().join("broken");
+    let out = run(["4", "4"], &broken);
+    assert!(!out.status.success());
+    assert!(one_line_error(&out.stderr).contains("f_5.pfm"));
+    assert_eq!(files_in(&broken), names[..5]);
+    for name in &names[..5] {
+        let same =
+            std::fs::read(broken.join(name)).unwrap() == std::fs::read(one.join(name)).unwrap();
+        assert!(same, "{name}");
+    }
+}
+
 #[test]
 fn a_truncated_stream_is_one_line_after_the_whole_frames() {
     let mut bytes = raw_stream(3);

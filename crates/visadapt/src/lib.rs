@@ -22,6 +22,7 @@
 //! | [`local`] | local adaptation: adaptation map, per-pixel thresholds, rod saturation and acuity | Sec. 6 (future work), Eq. 3–7 |
 //! | [`timecourse`] | thresholds over time after the light changes; the Eq. 8–9 mapping | Sec. 3.5, 4.2–4.3, Eq. 8–9, Figs. 8–10 |
 //! | [`sequence`] | image sequences of light and dark adaptation, animated PNG | Sec. 5, Fig. 12 |
+//! | [`video`] | a stream of frames through the time course, decoding and encoding overlapped | Sec. 4.4, Eq. 8–9 |
 //! | [`chart`] | the paper's test scene: ColorChecker, Snellen chart, gratings, spectral | Sec. 5, Fig. 11 |
 //! | [`observer`] | what an observer adapted to a luminance can see | Sec. 2–4 |
 //! | [`preview`] | the operator at preview resolution, a plain exposure, one pixel probed | Sec. 4, Eq. 4–7 |
@@ -60,6 +61,7 @@ mod simd;
 pub mod spectral;
 pub mod timecourse;
 pub mod tvi;
+pub mod video;
 pub mod visibility;
 
 pub use error::{Error, LimitsExceeded, Result};

@@ -18,13 +18,14 @@
 //! or `rgb24` frames to standard output, and the progress bar and the report then go to
 //! standard error.
 //!
-//! The work is a pipeline of three threads joined by bounded queues: a reader decodes
-//! frame n+1 while the operator maps frame n and a writer encodes and writes frame n−1.
-//! The operator is one thread, so the state is stepped in frame order; the output is the
-//! same, byte for byte, as doing one frame after another. HDR frames, display images and
-//! the file buffer go round and are reused, so memory does not grow with the number of
-//! frames (at most two of each exist at once). On an error, the frames before it are
-//! written, nothing after it is, and the error names its frame.
+//! The work is the library's pipeline ([`visadapt::video::run`]): decoder threads read
+//! frames n+1, n+2 while the operator maps frame n and encoder threads encode and write
+//! frames n−1, n−2 (`--decoders`, `--encoders`). The operator is one thread, so the state
+//! is stepped in frame order, and every frame is written atomically and in order; the
+//! output is the same, byte for byte, as doing one frame after another. HDR frames,
+//! display images and file buffers go round and are reused, so memory does not grow with
+//! the number of frames. On an error, the frames before it are written, nothing after it
+//! is, and the error names its frame. `--timings` prints where the time went.
 
 use crate::cli::{VideoArgs, VideoFormat};
 use crate::numbers::count;
@@ -32,11 +33,11 @@ use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc;
+use std::sync::Mutex;
 use visadapt::io::raw::{FrameReader, RawFormat};
 use visadapt::io::{self, OutputFormat};
-use visadapt::operator::{self, ViewingConditions};
-use visadapt::timecourse::Adaptation;
+use visadapt::operator::ViewingConditions;
+use visadapt::video::{self, Observer};
 use visadapt::{DisplayImage, HdrImage};
 
 /// Longest file name on the usual file systems (POSIX `NAME_MAX` on Linux, ext4, XFS,
@@ -243,17 +244,28 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
     };
     conditions.validate()?;
     let limits = args.limits.limits();
-    let (frames, total) = match &source {
+    let scale = args.scale.map(|s| s as f32);
+    let (frames, total, reader) = match &source {
         Source::Files(frames) => {
             let take = args.max_frames.map_or(frames.len(), |m| {
                 frames.len().min(usize::try_from(m).unwrap_or(usize::MAX))
             });
-            (&frames[..take], Some(take as u64))
+            let reader = Reader::Files {
+                frames: &frames[..take],
+                limits: &limits,
+                scale,
+            };
+            (&frames[..take], Some(take as u64), reader)
         }
         Source::Stream { width, height } => {
             // The size is checked before anything is read or allocated.
-            FrameReader::new(std::io::empty(), STDIN, *width, *height, &limits)?;
-            (&[][..], args.max_frames)
+            let stream = FrameReader::new(std::io::stdin(), STDIN, *width, *height, &limits)?;
+            let reader = Reader::Stream {
+                stream: Mutex::new(stream),
+                max_frames: args.max_frames,
+                scale,
+            };
+            (&[][..], args.max_frames, reader)
         }
     };
     // Never overwrite an input frame (under any name: every output against every input).
@@ -272,7 +284,6 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         })?;
     }
 
-    let dt = 1.0 / args.fps;
     let progress = match total {
         Some(n) => ProgressBar::new(n).with_style(
             ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}")
@@ -283,231 +294,30 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
                 .expect("valid template"),
         ),
     };
-    // Three stages overlap: the reader decodes frame n+1 while the operator maps frame n and
-    // the writer encodes frame n-1. The operator stays one thread, in frame order, because
-    // the adaptation state is stepped from each frame to the next.
-    let (to_operator, decoded) = mpsc::sync_channel::<anyhow::Result<Decoded>>(QUEUE);
-    let (free_hdr, reused_hdr) = mpsc::channel::<HdrImage>();
-    let (to_writer, mapped) = mpsc::sync_channel::<Mapped>(QUEUE);
-    let (free_display, reused_display) = mpsc::channel::<DisplayImage>();
-    let written = std::thread::scope(|s| {
-        let source = &source;
-        s.spawn(move || match source {
-            Source::Files(_) => read_files(frames, &limits, &to_operator, &reused_hdr),
-            Source::Stream { width, height } => read_stream(
-                (*width, *height),
-                args.max_frames,
-                &limits,
-                &to_operator,
-                &reused_hdr,
-            ),
-        });
-        let writer = s.spawn({
-            let progress = progress.clone();
-            move || write_frames(&mapped, &free_display, sink, &progress)
-        });
-        let operated = map_frames(
-            &args,
-            &conditions,
-            dt,
-            (&decoded, &free_hdr),
-            (&to_writer, &reused_display),
-            sink,
-        );
-        // No more frames for the writer: it finishes those it has, then ends.
-        drop(to_writer);
-        drop(decoded);
-        let written = writer.join().expect("the writer thread does not panic");
-        // The writer's error is for an earlier frame than the operator's (a frame reaches
-        // the writer only after the operator is done with it): report the first one.
-        let written = written?;
-        operated.map(|()| written)
-    })?;
-    progress.finish_and_clear();
-    if !args.json {
-        let to = if stdout {
-            "standard output".to_string()
-        } else {
-            args.output.display().to_string()
-        };
-        let frames = usize::try_from(written).unwrap_or(usize::MAX);
-        let report = format!("wrote {} to {to}", count(frames, "frame", "frames"));
-        // Standard output carries the frames with -o -: the report goes to standard error.
-        if stdout {
-            eprintln!("{report}");
-        } else {
-            println!("{report}");
-        }
-    }
-    Ok(())
-}
-
-/// Frames each queue between two stages holds beyond the one handed over: none. A stage
-/// hands its frame straight to the next (a rendezvous), so at most two decoded frames and
-/// two display images exist at once, whatever the length of the video. Measured on 24
-/// frames of 1920 × 1080 on two shared cores (whole process, medians of 7 interleaved
-/// runs): a queue of one frame was 0-7 % faster, within the noise, for 25-50 MiB more
-/// peak memory (168 against 121 MiB on Radiance frames).
-const QUEUE: usize = 0;
-
-/// A decoded frame on its way to the operator.
-struct Decoded {
-    /// The frame's number (in the file name, or from 0 on a stream).
-    n: u64,
-    /// The file it came from (`-` for standard input).
-    input: PathBuf,
-    hdr: HdrImage,
-}
-
-/// A mapped frame on its way to the writer.
-struct Mapped {
-    display: DisplayImage,
-    /// The file it goes to (`None` on a stream).
-    path: Option<PathBuf>,
-    /// The frame's JSON line, printed once the file is written (`--json`).
-    json: Option<String>,
-}
-
-/// The reader of numbered files: decode every frame in order, into images the operator
-/// hands back, and pass each on (or the first error, naming the frame, then stop). Ends
-/// early when the operator stops listening.
-fn read_files(
-    frames: &[(u64, PathBuf)],
-    limits: &visadapt::Limits,
-    to_operator: &mpsc::SyncSender<anyhow::Result<Decoded>>,
-    reused: &mpsc::Receiver<HdrImage>,
-) {
-    let mut bytes = Vec::new();
-    for (n, input) in frames {
-        let mut hdr = reused.try_recv().unwrap_or_else(|_| HdrImage::zeros(0, 0));
-        let read = io::read_into(input, limits, &mut bytes, &mut hdr)
-            .with_context(|| format!("frame {n} ({})", input.display()));
-        let failed = read.is_err();
-        let frame = read.map(|()| Decoded {
-            n: *n,
-            input: input.clone(),
-            hdr,
-        });
-        if to_operator.send(frame).is_err() || failed {
-            return;
-        }
-    }
-}
-
-/// The reader of raw frames on standard input: as [`read_files`], until the stream ends
-/// or `max_frames` have been read.
-fn read_stream(
-    (width, height): (u64, u64),
-    max_frames: Option<u64>,
-    limits: &visadapt::Limits,
-    to_operator: &mpsc::SyncSender<anyhow::Result<Decoded>>,
-    reused: &mpsc::Receiver<HdrImage>,
-) {
-    let reader = FrameReader::new(std::io::stdin().lock(), STDIN, width, height, limits);
-    let mut reader = match reader {
-        Ok(r) => r,
-        Err(e) => {
-            let _ = to_operator.send(Err(e.into()));
-            return;
+    let writer = Writer {
+        sink,
+        frames,
+        progress: progress.clone(),
+    };
+    // The frame `k`-th of the run is (its number, the file it came from).
+    let frame_of = |k: u64| -> (u64, PathBuf) {
+        match usize::try_from(k).ok().and_then(|k| frames.get(k)) {
+            Some((n, path)) => (*n, path.clone()),
+            None => (k, PathBuf::from("-")),
         }
     };
-    while max_frames.is_none_or(|m| reader.frames_read() < m) {
-        let n = reader.frames_read();
-        let mut hdr = reused.try_recv().unwrap_or_else(|_| HdrImage::zeros(0, 0));
-        let frame = match reader.read_into(&mut hdr) {
-            Ok(false) => return,
-            Ok(true) => Ok(Decoded {
-                n,
-                input: PathBuf::from("-"),
-                hdr,
-            }),
-            Err(e) => Err(anyhow::Error::from(e)),
-        };
-        let failed = frame.is_err();
-        if to_operator.send(frame).is_err() || failed {
-            return;
-        }
-    }
-}
-
-/// The writer: write every mapped frame, atomically and in order (or onto the stream),
-/// then hand its image back to the operator. Stops at the first error (the operator then
-/// stops too, as its next frame finds no writer). Returns the number of frames written.
-fn write_frames(
-    mapped: &mpsc::Receiver<Mapped>,
-    free: &mpsc::Sender<DisplayImage>,
-    sink: Sink,
-    progress: &ProgressBar,
-) -> anyhow::Result<u64> {
-    let mut written = 0;
-    let mut buf = Vec::new();
-    for frame in mapped {
-        match (sink, &frame.path) {
-            (Sink::Folder { format, .. }, Some(path)) => {
-                io::write_display(&frame.display, path, format)
-                    .with_context(|| path.display().to_string())?;
-            }
-            (Sink::Stream(raw), _) => {
-                let mut out = std::io::stdout().lock();
-                io::raw::write_frame(&frame.display, raw, &mut out, &mut buf)
-                    .and_then(|()| Ok(out.flush()?))
-                    .with_context(|| format!("frame {written}: standard output"))?;
-            }
-            (Sink::Folder { .. }, None) => unreachable!("a file frame has a path"),
-        }
-        if let Some(line) = frame.json {
-            println!("{line}");
-        }
-        written += 1;
-        progress.inc(1);
-        // The operator may have finished: the image is then simply dropped.
-        let _ = free.send(frame.display);
-    }
-    Ok(written)
-}
-
-/// The operator, on the calling thread: each decoded frame in order through the time
-/// course (Sec. 4.4) and the mapping, into a reused display image for the writer.
-fn map_frames(
-    args: &VideoArgs,
-    conditions: &ViewingConditions,
-    dt: f64,
-    (decoded, free_hdr): (
-        &mpsc::Receiver<anyhow::Result<Decoded>>,
-        &mpsc::Sender<HdrImage>,
-    ),
-    (to_writer, reused): (&mpsc::SyncSender<Mapped>, &mpsc::Receiver<DisplayImage>),
-    sink: Sink,
-) -> anyhow::Result<()> {
-    let mut eye: Option<Adaptation> = None;
-    let mut size = None;
+    let mut eye: Option<Observer> = None;
     let mut warned_units = false;
-    // The reader ends after sending every frame or an error.
-    for (k, frame) in decoded.iter().enumerate() {
-        let Decoded { n, input, mut hdr } = frame?;
-        let what = || {
+    let operator =
+        |k: u64, hdr: &mut HdrImage, display: &mut DisplayImage| -> anyhow::Result<Mapped> {
+            let (n, input) = frame_of(k);
             let name = if input.as_os_str() == "-" {
-                STDIN.into()
+                STDIN.to_string()
             } else {
                 input.display().to_string()
             };
-            format!("frame {n} ({name})")
-        };
-        match size {
-            None => size = Some((hdr.width, hdr.height)),
-            Some((w, h)) if (w, h) != (hdr.width, hdr.height) => {
-                bail!(
-                    "{}: {}x{} differs from the first frame's {w}x{h}",
-                    what(),
-                    hdr.width,
-                    hdr.height
-                )
-            }
-            Some(_) => {}
-        }
-        match args.scale {
-            Some(s) => hdr.scale(s as f32),
-            None if !hdr.absolute_units && !warned_units => {
+            let what = || format!("frame {n} ({name})");
+            if scale.is_none() && !hdr.absolute_units && !warned_units {
                 log::warn!(
                     "{}: the {} does not say its units; values are taken as cd/m² (use --scale)",
                     what(),
@@ -519,74 +329,228 @@ fn map_frames(
                 );
                 warned_units = true;
             }
-            None => {}
-        }
-        let conditions = ViewingConditions {
-            view: args.view.view(hdr.width, hdr.height),
-            ..conditions.clone()
-        };
-        if k == 0 {
-            let name = if input.as_os_str() == "-" {
-                Path::new(STDIN)
-            } else {
-                &input
+            let eye = match eye.as_mut() {
+                Some(eye) => eye,
+                None => {
+                    // The view --fov gives is that of the first frame's size (all frames have it).
+                    let conditions = ViewingConditions {
+                        view: args.view.view(hdr.width, hdr.height),
+                        ..conditions.clone()
+                    };
+                    super::warn_if_default_view(Path::new(&name), hdr, &conditions);
+                    eye.insert(Observer::new(conditions, args.fps)?)
+                }
             };
-            super::warn_if_default_view(name, &hdr, &conditions);
-        }
-        let (scene, report) = operator::prepare(&hdr, &conditions).with_context(what)?;
-        let state = match eye.as_mut() {
-            None => eye.insert(
-                Adaptation::adapted(
-                    report.world_adaptation_cd_m2,
-                    report.world_adaptation_scotopic_cd_m2,
-                )?
-                .with_undershoot(conditions.undershoot),
-            ),
-            Some(state) => {
-                state.step_to(dt, &report).with_context(what)?;
-                state
-            }
+            let frame = eye.frame(hdr, display).with_context(what)?;
+            let out = writer.sink.path(&input, n);
+            let json = args
+                .json
+                .then(|| json_line(n, &input, out.as_deref(), &frame));
+            Ok(Mapped { path: out, json })
         };
-        let mut display = reused.try_recv().unwrap_or_default();
-        let (mapping, _) =
-            operator::apply_state_into(&scene, &report, state, &conditions, &mut display)
-                .with_context(what)?;
-        drop(scene);
-        // Back to the reader for a later frame (if it has finished, the image is dropped).
-        let _ = free_hdr.send(hdr);
-        let out = sink.path(&input, n);
-        let json = args.json.then(|| {
-            let offset =
-                mapping.photopic_offset_cd_m2 + mapping.rod_weight * mapping.scotopic_offset_cd_m2;
-            serde_json::json!({
-                "frame": n,
-                "t_seconds": k as f64 * dt,
-                "input": input.display().to_string(),
-                "output": out.as_ref().map(|o| o.display().to_string()),
-                "world_adaptation_cd_m2": report.world_adaptation_cd_m2,
-                "world_adaptation_scotopic_cd_m2": report.world_adaptation_scotopic_cd_m2,
-                "cone_threshold_cd_m2": state.cone_threshold_cd_m2(),
-                "rod_threshold_scotopic_cd_m2": state.rod_threshold_scotopic_cd_m2(),
-                "photopic_scale": mapping.photopic_scale,
-                "scotopic_scale": mapping.scotopic_scale,
-                "rod_weight": mapping.rod_weight,
-                "offset_cd_m2": offset,
-                "acuity_cycles_per_degree": state.acuity_cycles_per_degree(),
-                "glare": visadapt::report::glare_json(&report),
-            })
-            .to_string()
-        });
-        let frame = Mapped {
-            display,
-            path: out,
-            json,
+    let threads = video::Threads {
+        decoders: args.decoders.get(),
+        encoders: args.encoders.get(),
+    };
+    let timings = video::run(&reader, operator, &writer, threads)?;
+    progress.finish_and_clear();
+    if args.timings {
+        eprintln!("{}", describe(&timings));
+    }
+    if !args.json {
+        let to = if stdout {
+            "standard output".to_string()
+        } else {
+            args.output.display().to_string()
         };
-        if to_writer.send(frame).is_err() {
-            // The writer stopped at an error, which it reports.
-            return Ok(());
+        let frames = usize::try_from(timings.frames).unwrap_or(usize::MAX);
+        let report = format!("wrote {} to {to}", count(frames, "frame", "frames"));
+        // Standard output carries the frames with -o -: the report goes to standard error.
+        if stdout {
+            eprintln!("{report}");
+        } else {
+            println!("{report}");
         }
     }
     Ok(())
+}
+
+/// The `--json` line of a frame.
+fn json_line(n: u64, input: &Path, out: Option<&Path>, frame: &video::Frame) -> String {
+    let (report, mapping, state) = (&frame.report, &frame.mapping, &frame.state);
+    let offset = mapping.photopic_offset_cd_m2 + mapping.rod_weight * mapping.scotopic_offset_cd_m2;
+    serde_json::json!({
+        "frame": n,
+        "t_seconds": frame.t_seconds,
+        "input": input.display().to_string(),
+        "output": out.map(|o| o.display().to_string()),
+        "world_adaptation_cd_m2": report.world_adaptation_cd_m2,
+        "world_adaptation_scotopic_cd_m2": report.world_adaptation_scotopic_cd_m2,
+        "cone_threshold_cd_m2": state.cone_threshold_cd_m2(),
+        "rod_threshold_scotopic_cd_m2": state.rod_threshold_scotopic_cd_m2(),
+        "photopic_scale": mapping.photopic_scale,
+        "scotopic_scale": mapping.scotopic_scale,
+        "rod_weight": mapping.rod_weight,
+        "offset_cd_m2": offset,
+        "acuity_cycles_per_degree": state.acuity_cycles_per_degree(),
+        "glare": visadapt::report::glare_json(report),
+    })
+    .to_string()
+}
+
+/// The `--timings` summary: the frame rate, each stage's time per frame, and the
+/// operator's waits, which tell the stage that bounds the rate.
+fn describe(t: &video::Timings) -> String {
+    let per = |d: std::time::Duration| {
+        format!("{:.1} ms", d.as_secs_f64() * 1e3 / t.frames.max(1) as f64)
+    };
+    let bound = if t.operator_waiting_for_frames > t.operator_waiting_for_encoders {
+        "decoding"
+    } else if t.operator_waiting_for_encoders > t.operator_waiting_for_frames {
+        "encoding"
+    } else {
+        "the operator"
+    };
+    let bound = if t.operator_waiting_for_frames + t.operator_waiting_for_encoders < t.operator / 10
+    {
+        "the operator"
+    } else {
+        bound
+    };
+    format!(
+        "timings: {} in {:.2} s, {:.1} frames/s; per frame: decoding {} ({} threads), \
+         operator {}, encoding {} ({} threads), writing {}; the operator waited {} for \
+         frames and {} for encoders (the rate is bound by {bound})",
+        count(
+            usize::try_from(t.frames).unwrap_or(usize::MAX),
+            "frame",
+            "frames"
+        ),
+        t.wall.as_secs_f64(),
+        t.frames_per_second(),
+        per(t.decoding),
+        t.threads.0,
+        per(t.operator),
+        per(t.encoding),
+        t.threads.1,
+        per(t.writing),
+        per(t.operator_waiting_for_frames),
+        per(t.operator_waiting_for_encoders),
+    )
+}
+
+/// The frames' reader, for [`video::run`]: files (read by several decoder threads) or raw
+/// frames on standard input (read in order). `--scale` is applied as a frame is decoded.
+enum Reader<'a> {
+    Files {
+        frames: &'a [(u64, PathBuf)],
+        limits: &'a visadapt::Limits,
+        scale: Option<f32>,
+    },
+    Stream {
+        stream: Mutex<FrameReader<std::io::Stdin>>,
+        max_frames: Option<u64>,
+        scale: Option<f32>,
+    },
+}
+
+impl video::Source<anyhow::Error> for Reader<'_> {
+    fn read(&self, k: u64, bytes: &mut Vec<u8>, hdr: &mut HdrImage) -> anyhow::Result<bool> {
+        let scale = match self {
+            Reader::Files {
+                frames,
+                limits,
+                scale,
+            } => {
+                let Some((n, input)) = usize::try_from(k).ok().and_then(|k| frames.get(k)) else {
+                    return Ok(false);
+                };
+                io::read_into(input, limits, bytes, hdr)
+                    .with_context(|| format!("frame {n} ({})", input.display()))?;
+                scale
+            }
+            Reader::Stream {
+                stream,
+                max_frames,
+                scale,
+            } => {
+                if max_frames.is_some_and(|m| k >= m) {
+                    return Ok(false);
+                }
+                let mut stream = stream.lock().unwrap_or_else(|e| e.into_inner());
+                if !stream.read_into(hdr)? {
+                    return Ok(false);
+                }
+                scale
+            }
+        };
+        if let Some(s) = scale {
+            hdr.scale(*s);
+        }
+        Ok(true)
+    }
+
+    fn in_order(&self) -> bool {
+        matches!(self, Reader::Stream { .. })
+    }
+}
+
+/// A mapped frame's way out: the file it goes to (`None` on a stream) and its JSON line,
+/// printed once the file is written (`--json`).
+struct Mapped {
+    path: Option<PathBuf>,
+    json: Option<String>,
+}
+
+/// The frames' writer, for [`video::run`]: encoded by several threads, written (files
+/// atomically, or onto standard output) in order, then counted on the progress bar.
+struct Writer<'a> {
+    sink: Sink<'a>,
+    /// The input frames (empty for a stream), to name a frame's file in errors.
+    frames: &'a [(u64, PathBuf)],
+    progress: ProgressBar,
+}
+
+impl video::Sink<anyhow::Error> for Writer<'_> {
+    type Frame = Mapped;
+
+    fn encode(&self, k: u64, display: &DisplayImage, bytes: &mut Vec<u8>) -> anyhow::Result<()> {
+        match self.sink {
+            Sink::Folder { format, .. } => {
+                video::encode(display, format, bytes).with_context(|| {
+                    let (n, input) = usize::try_from(k)
+                        .ok()
+                        .and_then(|k| self.frames.get(k))
+                        .map_or((k, Path::new("-")), |(n, p)| (*n, p.as_path()));
+                    self.sink
+                        .path(input, n)
+                        .map_or_else(|| format!("frame {k}"), |p| p.display().to_string())
+                })
+            }
+            Sink::Stream(raw) => io::raw::encode_frame(display, raw, bytes)
+                .with_context(|| format!("frame {k}: standard output")),
+        }
+    }
+
+    fn write(&self, k: u64, bytes: &[u8], frame: Mapped) -> anyhow::Result<()> {
+        match (self.sink, &frame.path) {
+            (Sink::Folder { .. }, Some(path)) => {
+                video::write_file(path, bytes).with_context(|| path.display().to_string())?;
+            }
+            (Sink::Stream(_), _) => {
+                let mut out = std::io::stdout().lock();
+                out.write_all(bytes)
+                    .and_then(|()| out.flush())
+                    .with_context(|| format!("frame {k}: standard output"))?;
+            }
+            (Sink::Folder { .. }, None) => unreachable!("a file frame has a path"),
+        }
+        if let Some(line) = frame.json {
+            println!("{line}");
+        }
+        self.progress.inc(1);
+        Ok(())
+    }
 }
 
 #[cfg(test)]
