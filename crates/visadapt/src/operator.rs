@@ -1194,7 +1194,7 @@ mod tests {
             for scotopic in [false, true] {
                 let im = scene(w, h, scotopic);
                 let report = plan(&im, &ViewingConditions::default()).unwrap();
-                for sigma in [0.3, 1.0, 2.19, 2.99] {
+                for sigma in [0.3, 1.0, 2.19, 2.99, 4.38, 4.99] {
                     let m = Mapping {
                         blur_sigma_px: sigma,
                         ..report.mapping
