@@ -63,8 +63,13 @@
 //! radius; the full-resolution map is a joint bilateral upsampling (Kopf, Cohen, Lischinski
 //! & Uyttendaele 2007) of the grid, each pixel weighting the four grid samples around it by
 //! distance and by how close their guide is to its own log luminance, so that the map
-//! keeps edges sharp at full resolution. The cost is linear in the pixels and flat in the
-//! radius.
+//! keeps edges sharp at full resolution. The per-pixel work (block means and upsampling)
+//! is linear in the pixels and flat in the radius; the grid's (the domain transform, in
+//! parallel over its two channels, and one acuity sigma per sample) grows as the radius
+//! shrinks, with the number of samples: about 83,000 at 0.25° on a 1080p frame 20° wide
+//! against 3,900 at 1° and 2,000 from 3° on (the step's cap). So the map is not flat in
+//! the radius at small radii; neither is the acuity stage, whose blurs cover more of
+//! the image where the sigmas vary faster.
 
 use crate::acuity::AcuityFilter;
 use crate::image::{Projection, View};
