@@ -4,8 +4,11 @@
 //!   operator as a video loop runs it, buffers reused);
 //! * `local_vs_global/local/WxH`: `plan`, the adaptation map, the per-pixel tables and
 //!   `local::apply_into` with the per-pixel acuity blur, buffers reused;
-//! * `radius/R/1920x1080`: the local operator at radii of 0.25 to 16 degrees (its cost is
-//!   meant to be flat in the radius).
+//! * `radius/R/1920x1080`: the local operator at radii of 0.25 to 16 degrees;
+//! * `local_stages/S/1920x1080`: its stages one by one at 1°, buffers reused: `map` (the
+//!   adaptation map), `tables` (the per-pixel coefficient tables), `mapping` (the mapping
+//!   pass and clipping, the map's acuity sigmas left out) and `apply` (the mapping pass,
+//!   the spatially varying acuity blur and clipping); `apply` − `mapping` is the blur.
 //!
 //! The frame spans four log units (0.01 to 100 cd/m², a dusk scene), so the local levels,
 //! rod weights and blur sigmas vary over it, seen at 20 degrees as in the operator bench.
@@ -101,5 +104,45 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+fn stages(c: &mut Criterion) {
+    let mut group = c.benchmark_group("local_stages");
+    group.sample_size(10);
+    let (w, h) = (1920, 1080);
+    let size = format!("{w}x{h}");
+    let im = frame(w, h);
+    group.throughput(Throughput::Elements((w * h) as u64));
+    let cond = conditions(w, h, AdaptationMode::Local(LocalAdaptation::default()));
+    let AdaptationMode::Local(options) = cond.adaptation else {
+        unreachable!("local conditions")
+    };
+    let report = plan(&im, &cond).expect("plan");
+    group.bench_function(BenchmarkId::new("map", &size), |b| {
+        b.iter(|| black_box(local_map(&im, &report, &cond, &options).expect("map")))
+    });
+    let map = local_map(&im, &report, &cond, &options).expect("map");
+    group.bench_function(BenchmarkId::new("tables", &size), |b| {
+        b.iter(|| {
+            black_box(LocalMapping::steady_state(
+                &map,
+                &report,
+                options.rod_saturation,
+            ))
+        })
+    });
+    let mapping = LocalMapping::steady_state(&map, &report, options.rod_saturation);
+    let mut out = DisplayImage::default();
+    let unblurred = local::AdaptationMap {
+        acuity_sigma_px: None,
+        ..map.clone()
+    };
+    group.bench_function(BenchmarkId::new("mapping", &size), |b| {
+        b.iter(|| black_box(local::apply_into(&im, &unblurred, &mapping, &mut out)))
+    });
+    group.bench_function(BenchmarkId::new("apply", &size), |b| {
+        b.iter(|| black_box(local::apply_into(&im, &map, &mapping, &mut out)))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench, stages);
 criterion_main!(benches);

@@ -152,11 +152,8 @@ pub fn varying_gaussian_blur(
         let range = value_range(p);
         let source = p.to_vec();
         // The unblurred part: pixels not blurred keep their values, the others start at 0.
-        for (v, &s) in p.iter_mut().zip(sigma_px) {
-            if f64::from(s) >= MIN_BLUR_SIGMA_PX {
-                *v = 0.0;
-            }
-        }
+        let min_sigma = min_blur_sigma_f32();
+        widest!(clear_blurred(p, sigma_px, min_sigma));
         for (j, &sigma) in levels.iter().enumerate() {
             let reach = crate::blur::reach_px(sigma, REGION_TOLERANCE / range);
             for region in tiles.regions(j, reach) {
@@ -205,17 +202,46 @@ pub fn varying_gaussian_blur(
     }
 }
 
+/// The smallest `f32` at or above [`MIN_BLUR_SIGMA_PX`]: for an `f32` sigma `s`,
+/// `s >= min_blur_sigma_f32()` exactly when `f64::from(s) >= MIN_BLUR_SIGMA_PX`.
+fn min_blur_sigma_f32() -> f32 {
+    let t = MIN_BLUR_SIGMA_PX as f32;
+    if f64::from(t) < MIN_BLUR_SIGMA_PX {
+        f32::from_bits(t.to_bits() + 1)
+    } else {
+        t
+    }
+}
+
 /// Largest minus smallest value of a plane (`+∞` when it holds a non-finite value).
 fn value_range(plane: &[f32]) -> f64 {
-    let (lo, hi) = plane
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
-            (lo.min(v), hi.max(v))
-        });
-    if plane.iter().all(|v| v.is_finite()) {
+    let (lo, hi, finite) = widest!(range_kernel(plane));
+    if finite {
         f64::from(hi) - f64::from(lo)
     } else {
         f64::INFINITY
+    }
+}
+
+/// Smallest and largest value of a plane and whether all are finite.
+#[inline(always)]
+fn range_kernel(plane: &[f32]) -> (f32, f32, bool) {
+    let (mut lo, mut hi, mut finite) = (f32::INFINITY, f32::NEG_INFINITY, true);
+    // Selects rather than `f32::min`/`max` (the same values: a NaN never replaces a
+    // bound, and `finite` records it), so that the loop vectorises.
+    for &v in plane {
+        lo = if v < lo { v } else { lo };
+        hi = if v > hi { v } else { hi };
+        finite &= v.is_finite();
+    }
+    (lo, hi, finite)
+}
+
+/// Zero the pixels of `plane` that are blurred (sigma at or above `min_sigma`).
+#[inline(always)]
+fn clear_blurred(plane: &mut [f32], sigma_px: &[f32], min_sigma: f32) {
+    for (v, &s) in plane.iter_mut().zip(sigma_px) {
+        *v = if s >= min_sigma { 0.0 } else { *v };
     }
 }
 
@@ -357,6 +383,12 @@ impl Tiles {
 /// [`weight`] in a branch-free form the compiler vectorises (the same operations, so the
 /// same values; tested).
 fn accumulate(out: &mut [f32], level: &[f32], levels: &[f32], j: usize, sigma_px: &[f32]) {
+    widest!(accumulate_kernel(out, level, levels, j, sigma_px))
+}
+
+/// [`accumulate`]'s loop.
+#[inline(always)]
+fn accumulate_kernel(out: &mut [f32], level: &[f32], levels: &[f32], j: usize, sigma_px: &[f32]) {
     let here = levels[j];
     let h2 = here * here;
     // The rising side from the level below (none for the first level), the falling side to
@@ -610,6 +642,14 @@ mod tests {
             // Noise spans 0..1: the bound is relative to full contrast 1.
             assert!(worst < 0.0143, "σ {sigma}: {worst}");
         }
+    }
+
+    #[test]
+    fn the_f32_threshold_is_the_f64_one() {
+        let t = min_blur_sigma_f32();
+        assert!(f64::from(t) >= MIN_BLUR_SIGMA_PX);
+        let below = f32::from_bits(t.to_bits() - 1);
+        assert!(f64::from(below) < MIN_BLUR_SIGMA_PX);
     }
 
     #[test]

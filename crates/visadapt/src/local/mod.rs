@@ -62,6 +62,22 @@
 //! of the light (the eye moves over the scene faster than it adapts), and once adapted the
 //! mapping is the steady local one exactly. See [`LocalMapping::for_time_course`].
 
+/// `kernel(args)` compiled for the widest instruction set of the processor
+/// ([`crate::simd::Isa`]), for the per-pixel loops of local adaptation (`kernel` is an
+/// `#[inline(always)]` function; one closure per instruction set, as the blur's kernels are
+/// dispatched, so that each is inlined into its target-feature function). None of these
+/// loops fuses a multiply-add, so every instruction set gives the same values, bit for
+/// bit (tested).
+macro_rules! widest {
+    ($f:ident ( $($a:expr),* $(,)? )) => {
+        match crate::simd::Isa::detect() {
+            crate::simd::Isa::Avx512Fma => crate::simd::Isa::Avx512Fma.run(|| $f($($a),*)),
+            crate::simd::Isa::Avx2Fma => crate::simd::Isa::Avx2Fma.run(|| $f($($a),*)),
+            crate::simd::Isa::Baseline => $f($($a),*),
+        }
+    };
+}
+
 pub mod acuity;
 pub mod map;
 
@@ -126,6 +142,9 @@ impl LocalAdaptation {
 pub(crate) struct Table<const K: usize> {
     start: f32,
     values: Vec<[f32; K]>,
+    /// Per node the difference to the next node's values (the last node's: 0), so that
+    /// a look-up reads one entry of each vector.
+    deltas: Vec<[f32; K]>,
 }
 
 impl<const K: usize> Table<K> {
@@ -135,24 +154,43 @@ impl<const K: usize> Table<K> {
         let below = (-min.min(0.0) * steps).ceil();
         let above = (max.max(0.0) * steps).ceil();
         let count = (below + above) as usize + 2;
-        let values = (0..count)
+        let values: Vec<[f32; K]> = (0..count)
             .map(|j| f((j as f64 - f64::from(below)) / f64::from(steps)))
+            .collect();
+        let deltas = (0..count)
+            .map(|j| match values.get(j + 1) {
+                Some(b) => std::array::from_fn(|k| b[k] - values[j][k]),
+                None => [0.0; K],
+            })
             .collect();
         Table {
             start: -below / steps,
             values,
+            deltas,
         }
     }
 
-    /// Linear interpolation at `offset` (clamped to the table).
+    /// Linear interpolation at `offset` (clamped to the table): `a + t·(b − a)` between
+    /// the nodes `a` and `b` around it. Written without a panicking path (the entries are
+    /// read with `get`, always in range), so that loops over pixels vectorise (gathers).
     #[inline(always)]
     pub(crate) fn at(&self, offset: f32) -> [f32; K] {
-        let last = self.values.len() - 2;
-        let p = ((offset - self.start) * TABLE_STEPS_PER_LOG_UNIT).clamp(0.0, last as f32 + 1.0);
-        let i = (p as usize).min(last);
+        let last = self.values.len().saturating_sub(2);
+        let top = last as f32 + 1.0;
+        let p = (offset - self.start) * TABLE_STEPS_PER_LOG_UNIT;
+        // `clamp` without its assertion (NaN stays NaN, as with `clamp`).
+        let p = if p < 0.0 {
+            0.0
+        } else if p > top {
+            top
+        } else {
+            p
+        };
+        let i = ((p as u32) as usize).min(last);
         let t = p - i as f32;
-        let (a, b) = (&self.values[i], &self.values[i + 1]);
-        std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
+        let a = self.values.get(i).copied().unwrap_or([0.0; K]);
+        let d = self.deltas.get(i).copied().unwrap_or([0.0; K]);
+        std::array::from_fn(|k| a[k] + t * d[k])
     }
 }
 
@@ -379,32 +417,78 @@ fn acuity_blur(
 }
 
 /// The local mapping of the pixels of `xyz` (and their `scotopic` samples and
-/// `[photopic, scotopic]` map offsets) into `r`, `g`, `b`.
+/// `[photopic, scotopic]` map offsets) into `r`, `g`, `b`, compiled for the widest
+/// instruction set of the processor (the same result on every one: no multiply-add is
+/// fused; the table look-ups become gathers).
 fn map_chunk(
     mapping: &LocalMapping,
-    [xs, ys, zs]: [&[f32]; 3],
+    xyz: [&[f32]; 3],
     scotopic: Option<&[f32]>,
-    [dp, ds]: [&[f32]; 2],
+    offsets: [&[f32]; 2],
     r: &mut [f32],
     g: &mut [f32],
     b: &mut [f32],
 ) -> PixelStats {
-    let (mut non_finite, mut negative, mut saturated) = (0usize, 0usize, 0usize);
+    widest!(map_chunk_kernel(mapping, xyz, scotopic, offsets, r, g, b))
+}
+
+/// [`map_chunk`]'s loop: one copy per kind of scotopic input, each branch-free.
+#[inline(always)]
+fn map_chunk_kernel(
+    mapping: &LocalMapping,
+    xyz: [&[f32]; 3],
+    scotopic: Option<&[f32]>,
+    offsets: [&[f32]; 2],
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+) -> PixelStats {
+    let mut counts = [0u32; 3];
+    match scotopic {
+        Some(s) => map_pixels::<true>(mapping, xyz, s, offsets, [r, g, b], &mut counts),
+        None => map_pixels::<false>(mapping, xyz, &[], offsets, [r, g, b], &mut counts),
+    }
+    let [non_finite, negative, saturated] = counts.map(|c| c as usize);
+    PixelStats {
+        non_finite,
+        negative,
+        clipped: 0,
+        saturated,
+    }
+}
+
+/// The pixels of [`map_chunk_kernel`], with the file's scotopic samples `s` when
+/// `FILE_SCOTOPIC` (else estimated from XYZ); adds to `[non-finite, negative, saturated]`.
+#[inline(always)]
+fn map_pixels<const FILE_SCOTOPIC: bool>(
+    mapping: &LocalMapping,
+    [xs, ys, zs]: [&[f32]; 3],
+    s: &[f32],
+    [dp, ds]: [&[f32]; 2],
+    [r, g, b]: [&mut [f32]; 3],
+    counts: &mut [u32; 3],
+) {
+    let n = r.len();
+    let (xs, ys, zs, dp, ds) = (&xs[..n], &ys[..n], &zs[..n], &dp[..n], &ds[..n]);
+    let s = if FILE_SCOTOPIC { &s[..n] } else { s };
+    let (g, b) = (&mut g[..n], &mut b[..n]);
+    let [mut non_finite, mut negative, mut saturated] = *counts;
     let saturation = if mapping.rod_saturation {
         ROD_SATURATION_SCOTOPIC_CD_M2
     } else {
         f32::INFINITY
     };
-    for j in 0..r.len() {
-        let s = scotopic.map_or(0.0, |s| s[j]);
-        let (finite, neg, v) = operator::sanitize([xs[j], ys[j], zs[j], s]);
-        let (sat, [x, y, z, s]) = operator::saturate(v, mapping.max_input);
-        non_finite += usize::from(!finite);
-        negative += usize::from(neg);
-        saturated += usize::from(sat);
-        let v = match scotopic {
-            Some(_) => s,
-            None => scotopic::from_xyz(x, y, z),
+    for j in 0..n {
+        let sj = if FILE_SCOTOPIC { s[j] } else { 0.0 };
+        let (finite, neg, v) = operator::sanitize([xs[j], ys[j], zs[j], sj]);
+        let (sat, [x, y, z, sv]) = operator::saturate(v, mapping.max_input);
+        non_finite += u32::from(!finite);
+        negative += u32::from(neg);
+        saturated += u32::from(sat);
+        let v = if FILE_SCOTOPIC {
+            sv
+        } else {
+            scotopic::from_xyz(x, y, z)
         };
         let c = mapping.cone.at(dp[j]);
         let [rod, rod_offset] = mapping.rod.at(ds[j]);
@@ -414,12 +498,7 @@ fn map_chunk(
         g[j] = c[3] * x + c[4] * y + c[5] * z + grey;
         b[j] = c[6] * x + c[7] * y + c[8] * z + grey;
     }
-    PixelStats {
-        non_finite,
-        negative,
-        clipped: 0,
-        saturated,
-    }
+    *counts = [non_finite, negative, saturated];
 }
 
 /// Quantiles of a local adaptation level over the image.
@@ -503,6 +582,71 @@ impl LocalReport {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The look-up as first written (`a + t·(b − a)` from two entries, with `clamp`), the
+    /// reference the branch-free one is pinned to, bit for bit.
+    fn reference_at<const K: usize>(t: &Table<K>, offset: f32) -> [f32; K] {
+        let last = t.values.len() - 2;
+        let p = ((offset - t.start) * TABLE_STEPS_PER_LOG_UNIT).clamp(0.0, last as f32 + 1.0);
+        let i = (p as usize).min(last);
+        let f = p - i as f32;
+        let (a, b) = (&t.values[i], &t.values[i + 1]);
+        std::array::from_fn(|k| a[k] + f * (b[k] - a[k]))
+    }
+
+    #[test]
+    fn table_look_ups_are_the_reference_bit_for_bit() {
+        let t = Table::<2>::new(-3.3, 2.1, |d| [10f64.powf(-d) as f32, d.sin() as f32]);
+        for k in 0..20_000 {
+            let d = -5.0 + 9.0 * k as f32 / 19_999.0;
+            let (got, want) = (t.at(d), reference_at(&t, d));
+            assert_eq!(got.map(f32::to_bits), want.map(f32::to_bits), "{d}");
+        }
+    }
+
+    /// The mapping pass compiled for the widest instruction set gives the baseline build's
+    /// values bit for bit (with and without a scotopic plane, bad pixels included).
+    #[test]
+    fn mapping_pass_is_the_same_on_every_instruction_set() {
+        let n = 3000;
+        let mut seed = 21u32;
+        let mut noise = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let mut planes: Vec<Vec<f32>> = (0..4)
+            .map(|_| (0..n).map(|_| 10f32.powf(8.0 * noise() - 4.0)).collect())
+            .collect();
+        planes[0][7] = f32::NAN;
+        planes[1][9] = -2.0;
+        planes[2][11] = 1e30;
+        let dp: Vec<f32> = (0..n).map(|_| 6.0 * noise() - 4.0).collect();
+        let ds: Vec<f32> = (0..n).map(|_| 6.0 * noise() - 4.0).collect();
+        let mapping = LocalMapping {
+            cone: Table::new(-4.0, 2.0, |d| {
+                std::array::from_fn(|k| ((k as f64 + 1.0) * 0.1 * 10f64.powf(-0.7 * d)) as f32)
+            }),
+            rod: Table::new(-4.0, 2.0, |d| {
+                [(0.3 * 10f64.powf(-0.9 * d)) as f32, (0.01 * d) as f32]
+            }),
+            display_max_cd_m2: 100.0,
+            rod_saturation: true,
+            max_input: 1e6,
+        };
+        for scotopic in [None, Some(planes[3].as_slice())] {
+            let xyz = [planes[0].as_slice(), &planes[1], &planes[2]];
+            let mut want = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+            let [r, g, b] = want.each_mut().map(|v| v.as_mut_slice());
+            let ws = map_chunk_kernel(&mapping, xyz, scotopic, [&dp, &ds], r, g, b);
+            let mut got = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+            let [r, g, b] = got.each_mut().map(|v| v.as_mut_slice());
+            let gs = map_chunk(&mapping, xyz, scotopic, [&dp, &ds], r, g, b);
+            assert_eq!(ws, gs);
+            for (a, b) in got.iter().flatten().zip(want.iter().flatten()) {
+                assert_eq!(a.to_bits(), b.to_bits());
+            }
+        }
+    }
 
     #[test]
     fn tables_hit_zero_exactly_and_interpolate_closely() {
