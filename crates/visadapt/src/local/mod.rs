@@ -419,7 +419,8 @@ fn acuity_blur(
 /// The local mapping of the pixels of `xyz` (and their `scotopic` samples and
 /// `[photopic, scotopic]` map offsets) into `r`, `g`, `b`, compiled for the widest
 /// instruction set of the processor (the same result on every one: no multiply-add is
-/// fused; the table look-ups become gathers).
+/// fused). The two table look-ups per pixel stay scalar: the compiler does not turn them
+/// into gathers here (README, local adaptation performance).
 fn map_chunk(
     mapping: &LocalMapping,
     xyz: [&[f32]; 3],
