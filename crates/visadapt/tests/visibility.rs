@@ -311,7 +311,7 @@ fn same_relative_noise_visible_by_day_invisible_at_night() {
 /// the acuity Gaussian of Eq. 7 at 285 pixels per degree.
 ///
 /// Tolerances follow the blur module's measured gain accuracy (absolute, against
-/// `exp(−2π²σ²f²)`): 0.1 % for its exact kernel (σ < 3 px, daylight here), 0.5 % for its
+/// `exp(−2π²σ²f²)`): 0.1 % for its exact kernel (σ < 5 px, daylight here), 0.5 % for its
 /// recursive filter (σ ≥ 5 px, moonlight here), times the grating's unfiltered JNDs.
 ///
 /// With the grating's peak at twice the mean `L`, the Sec. 4.4 rule adapts the observer to
