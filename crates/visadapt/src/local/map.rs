@@ -563,18 +563,11 @@ fn block_band(image: &HdrImage, step: usize, gy: usize, guide: &mut [f32], scot:
     }
 }
 
-/// The domain transform's recursive filter (module docs) of `channels` in place, on a
-/// `gw × gh` grid whose samples are `step_deg` degrees wide, edges from `guide`.
-fn domain_transform(
-    channels: &mut [&mut Vec<f64>],
-    guide: &[f64],
-    step_deg: &[f64],
-    gw: usize,
-    gh: usize,
-    sigma_deg: f64,
-) {
-    // Link lengths in degrees: `dh[i]` from sample i−1 to i along the row, `dv[i]` from
-    // the sample above.
+/// The domain transform's link lengths in degrees on a `gw × gh` grid: `dh[i]` from
+/// sample i−1 to i along the row, `dv[i]` from the sample above (0 on the first column
+/// and row): the mean of the two samples' widths plus `EDGE_DEGREES_PER_LOG_UNIT` times
+/// the guide's step between them.
+fn link_lengths_deg(guide: &[f64], step_deg: &[f64], gw: usize, gh: usize) -> (Vec<f64>, Vec<f64>) {
     let n = gw * gh;
     let mut dh = vec![0f64; n];
     let mut dv = vec![0f64; n];
@@ -591,6 +584,20 @@ fn domain_transform(
             }
         }
     }
+    (dh, dv)
+}
+
+/// The domain transform's recursive filter (module docs) of `channels` in place, on a
+/// `gw × gh` grid whose samples are `step_deg` degrees wide, edges from `guide`.
+fn domain_transform(
+    channels: &mut [&mut Vec<f64>],
+    guide: &[f64],
+    step_deg: &[f64],
+    gw: usize,
+    gh: usize,
+    sigma_deg: f64,
+) {
+    let (dh, dv) = link_lengths_deg(guide, step_deg, gw, gh);
     let iterations = ITERATIONS as i32;
     let norm = 3f64.sqrt() / (4f64.powi(iterations) - 1.0).sqrt();
     // Weight of the previous sample, `a_i^d = exp(−√2·d/σ_i)`; 1 (a constant signal) for
@@ -879,22 +886,7 @@ mod tests {
         gh: usize,
         sigma_deg: f64,
     ) {
-        let n = gw * gh;
-        let mut dh = vec![0f64; n];
-        let mut dv = vec![0f64; n];
-        for y in 0..gh {
-            for x in 0..gw {
-                let i = y * gw + x;
-                if x > 0 {
-                    dh[i] = 0.5 * (step_deg[i] + step_deg[i - 1])
-                        + EDGE_DEGREES_PER_LOG_UNIT * (guide[i] - guide[i - 1]).abs();
-                }
-                if y > 0 {
-                    dv[i] = 0.5 * (step_deg[i] + step_deg[i - gw])
-                        + EDGE_DEGREES_PER_LOG_UNIT * (guide[i] - guide[i - gw]).abs();
-                }
-            }
-        }
+        let (dh, dv) = link_lengths_deg(guide, step_deg, gw, gh);
         let iterations = ITERATIONS as i32;
         let norm = 3f64.sqrt() / (4f64.powi(iterations) - 1.0).sqrt();
         for i in 0..iterations {
