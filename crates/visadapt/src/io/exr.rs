@@ -371,7 +371,7 @@ fn decode_checked(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
 
     let pending = collect_blocks(bytes, &meta, tables_start, index)?;
     let planes = decompress_and_scatter(header, &layout, &pending, &budget)?;
-    debug_assert_eq!(planes.first().map(Vec::len), Some(n));
+    debug_assert_eq!(planes.planes.first().map(Vec::len), Some(n));
     to_hdr(header, &layout, planes, width, height)
 }
 
@@ -641,14 +641,56 @@ fn map_items<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync + Send) -
     }
 }
 
+/// Map `f` over `items` mutably, in parallel with the `rayon` feature.
+fn map_items_mut<T: Send, R: Send>(
+    items: &mut [T],
+    f: impl Fn(&mut T) -> R + Sync + Send,
+) -> Vec<R> {
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        items.par_iter_mut().map(f).collect()
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        items.iter_mut().map(f).collect()
+    }
+}
+
+/// The planes read from the blocks, and whether they already hold XYZ.
+#[derive(Debug)]
+struct Planes {
+    /// One per channel of [`Layout::channels`], each at the channel's own resolution.
+    planes: Vec<Vec<f32>>,
+    /// Whether the RGB→XYZ conversion (with the `whiteLuminance` scale) was applied to
+    /// each block as it was copied out (only for [`Layout::Rgb`] with all three channels).
+    xyz: bool,
+}
+
+/// The `whiteLuminance` scale of a part (1 when absent or unusable).
+fn white_scale(header: &Header) -> f64 {
+    header
+        .own_attributes
+        .white_luminance
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .map_or(1.0, f64::from)
+}
+
 /// Decompress every block and copy the samples of the layout's channels into planes (one
 /// per channel of [`Layout::channels`], each at the channel's own resolution).
+///
+/// Scan-line parts (every block the full width, the common case of rendered frames) are
+/// decompressed and copied out in parallel, block by block, each block's rows straight
+/// into its own rows of the planes (converted to XYZ there as well when the layout is
+/// RGB); tiled parts are decompressed in parallel and copied out on the calling thread.
+/// Either way the planes are allocated only once the first block has decompressed (most
+/// damaged files fail on it), and the first error in block order is the one reported.
 fn decompress_and_scatter(
     header: &Header,
     layout: &Layout,
     pending: &[PendingBlock<'_>],
     budget: &Budget<'_>,
-) -> Result<Vec<Vec<f32>>> {
+) -> Result<Planes> {
     let used = layout.channels();
     let (w, h) = (header.layer_size.0, header.layer_size.1);
 
@@ -690,55 +732,186 @@ fn decompress_and_scatter(
             header
         }
     };
-
-    let mut planes: Vec<Vec<f32>> = Vec::new();
-    let mut rest = pending;
-    while !rest.is_empty() {
-        let batch = budget.batch(rest)?;
-        rest = &rest[batch.len()..];
-        let decoded = map_items(batch, |block| -> Result<Vec<u8>> {
-            let data = foreign(|| {
-                header
-                    .compression
-                    .decompress_image_section_from_le(
-                        header_for(block),
-                        block.data.to_vec(),
-                        block.rect,
-                        false,
-                    )
-                    .map_err(exr_error)
-            })?;
-            if data.len() != block.expected_len {
-                return Err(invalid("decompressed block has the wrong size"));
-            }
-            Ok(data)
-        });
-        // Allocate the planes only once the first blocks decoded: most damaged files fail
-        // on their first block, before any image-sized allocation.
-        if planes.is_empty() {
-            planes = used
-                .iter()
-                .map(|&i| {
-                    let s = header.channels.list[i].sampling;
-                    vec![0.0f32; (w / s.0.max(1)) * (h / s.1.max(1))]
-                })
-                .collect();
+    let decompress = |block: &PendingBlock<'_>| -> Result<Vec<u8>> {
+        let data = foreign(|| {
+            header
+                .compression
+                .decompress_image_section_from_le(
+                    header_for(block),
+                    block.data.to_vec(),
+                    block.rect,
+                    false,
+                )
+                .map_err(exr_error)
+        })?;
+        if data.len() != block.expected_len {
+            return Err(invalid("decompressed block has the wrong size"));
         }
-        for (block, data) in batch.iter().zip(decoded) {
-            scatter(header, &used, block.rect, &data?, &mut planes)?;
+        Ok(data)
+    };
+    let allocate = || -> Vec<Vec<f32>> {
+        used.iter()
+            .map(|&i| {
+                let s = header.channels.list[i].sampling;
+                vec![0.0f32; (w / s.0.max(1)) * (h / s.1.max(1))]
+            })
+            .collect()
+    };
+
+    let full_width_lines = header.blocks == BlockDescription::ScanLines
+        && pending
+            .iter()
+            .all(|b| b.rect.position.0 == 0 && b.rect.size.0 == w);
+    if !full_width_lines {
+        let mut planes: Vec<Vec<f32>> = Vec::new();
+        let mut rest = pending;
+        while !rest.is_empty() {
+            let batch = budget.batch(rest)?;
+            rest = &rest[batch.len()..];
+            let decoded = map_items(batch, decompress);
+            if planes.is_empty() {
+                planes = allocate();
+            }
+            let mut whole: Vec<&mut [f32]> = planes.iter_mut().map(|p| &mut p[..]).collect();
+            let origin = vec![0usize; whole.len()];
+            for (block, data) in batch.iter().zip(decoded) {
+                scatter(header, &used, block.rect, &data?, &mut whole, &origin)?;
+            }
+        }
+        return Ok(Planes { planes, xyz: false });
+    }
+
+    // RGB is converted to XYZ block by block when all three channels are there at full
+    // resolution and the matrix is usable (otherwise `to_hdr` converts, or reports the
+    // degenerate `chromaticities`, as before).
+    let matrix = match *layout {
+        Layout::Rgb {
+            r: Some(_),
+            g: Some(_),
+            b: Some(_),
+        } if !subsampled => file_matrix(header).ok(),
+        _ => None,
+    };
+    let scale = white_scale(header);
+    let fill = |block: &PendingBlock<'_>,
+                data: &[u8],
+                dst: &mut [&mut [f32]],
+                origin: &[usize]|
+     -> Result<()> {
+        scatter(header, &used, block.rect, data, dst, origin)?;
+        if let (Some(m), [r, g, b]) = (&matrix, dst) {
+            colour::rgb_planes_to_xyz(m, scale, r, g, b);
+        }
+        Ok(())
+    };
+
+    // The first block alone, before anything image-sized is allocated.
+    if pending.is_empty() {
+        return Ok(Planes {
+            planes: Vec::new(),
+            xyz: false,
+        });
+    }
+    let first_data = decompress(&budget.batch(&pending[..1])?[0])?;
+    let mut planes = allocate();
+
+    // Each block's rows of every plane, as disjoint slices: the blocks in the order of their
+    // rows, each plane cut along them.
+    let mut order: Vec<usize> = (0..pending.len()).collect();
+    order.sort_by_key(|&i| pending[i].rect.position.1);
+    let mut jobs: Vec<(Vec<&mut [f32]>, Vec<usize>)> = (0..pending.len())
+        .map(|_| (Vec::new(), Vec::new()))
+        .collect();
+    for (pi, plane) in planes.iter_mut().enumerate() {
+        let s = header.channels.list[used[pi]].sampling;
+        let (sx, sy) = (s.0.max(1), s.1.max(1));
+        let plane_w = w / sx;
+        let mut rest: &mut [f32] = plane;
+        let mut consumed = 0usize;
+        for &bi in &order {
+            let rect = pending[bi].rect;
+            let y0 = rect.position.1 as usize;
+            let (r0, r1) = (y0.div_ceil(sy), (y0 + rect.size.1).div_ceil(sy));
+            let (start, end) = (r0 * plane_w, r1 * plane_w);
+            if start < consumed || end - consumed > rest.len() {
+                return Err(invalid("overlapping pixel blocks"));
+            }
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(start - consumed);
+            let (mine, tail) = tail.split_at_mut(end - start);
+            rest = tail;
+            consumed = end;
+            jobs[bi].0.push(mine);
+            jobs[bi].1.push(start);
         }
     }
-    Ok(planes)
+
+    {
+        let (dst, origin) = &mut jobs[0];
+        fill(&pending[0], &first_data, dst, origin)?;
+    }
+    drop(first_data);
+    let (mut blocks, mut slots) = (&pending[1..], &mut jobs[1..]);
+    while !blocks.is_empty() {
+        let count = budget.batch(blocks)?.len();
+        let (batch, rest) = blocks.split_at(count);
+        let (batch_slots, rest_slots) = std::mem::take(&mut slots).split_at_mut(count);
+        let mut work: Vec<_> = batch.iter().zip(batch_slots.iter_mut()).collect();
+        let results = map_items_mut(&mut work, |(block, (dst, origin))| -> Result<()> {
+            let data = decompress(block)?;
+            fill(block, &data, dst, origin)
+        });
+        results.into_iter().collect::<Result<()>>()?;
+        (blocks, slots) = (rest, rest_slots);
+    }
+    drop(jobs);
+    Ok(Planes {
+        planes,
+        xyz: matrix.is_some(),
+    })
+}
+
+/// Convert one line of `count` samples of type `ty` (native endian) into `dst`.
+fn convert_line(ty: SampleType, src: &[u8], dst: &mut [f32]) {
+    match ty {
+        SampleType::F16 => {
+            use half::slice::{HalfBitsSliceExt, HalfFloatSliceExt};
+            // In pieces through a small buffer of bits (the bytes need not be aligned),
+            // converted by the `half` crate's slice conversion (F16C when the CPU has it).
+            // Every f16 is exactly an f32: the result is the sample-by-sample one.
+            const PIECE: usize = 256;
+            let mut bits = [0u16; PIECE];
+            for (d, s) in dst.chunks_mut(PIECE).zip(src.chunks(2 * PIECE)) {
+                let b = &mut bits[..d.len()];
+                for (v, pair) in b.iter_mut().zip(s.chunks_exact(2)) {
+                    *v = u16::from_ne_bytes([pair[0], pair[1]]);
+                }
+                b.reinterpret_cast::<half::f16>().convert_to_f32_slice(d);
+            }
+        }
+        SampleType::F32 => {
+            for (d, s) in dst.iter_mut().zip(src.chunks_exact(4)) {
+                *d = f32::from_ne_bytes([s[0], s[1], s[2], s[3]]);
+            }
+        }
+        SampleType::U32 => {
+            for (d, s) in dst.iter_mut().zip(src.chunks_exact(4)) {
+                *d = u32::from_ne_bytes([s[0], s[1], s[2], s[3]]) as f32;
+            }
+        }
+    }
 }
 
 /// Copy the samples of the `used` channels from one decompressed block (lines in order,
-/// each line holding every channel's samples in channel-list order, native endian).
+/// each line holding every channel's samples in channel-list order, native endian) into
+/// `planes`, where `planes[p]` starts at sample `origin[p]` of plane `p` (0 for a whole
+/// plane, the first sample of the block's rows for a block's own slice).
 fn scatter(
     header: &Header,
     used: &[usize],
     rect: IntegerBounds,
     data: &[u8],
-    planes: &mut [Vec<f32>],
+    planes: &mut [&mut [f32]],
+    origin: &[usize],
 ) -> Result<()> {
     let short = || invalid("decompressed block is too short");
     let (x0, y0) = (rect.position.0 as usize, rect.position.1 as usize);
@@ -757,26 +930,11 @@ fn scatter(
                 continue;
             };
             let plane_w = header.layer_size.0 / sx;
-            let start = (y / sy) * plane_w + x0 / sx;
+            let start = ((y / sy) * plane_w + x0 / sx)
+                .checked_sub(origin[p])
+                .ok_or_else(short)?;
             let dst = planes[p].get_mut(start..start + count).ok_or_else(short)?;
-            match c.sample_type {
-                SampleType::F16 => {
-                    for (d, s) in dst.iter_mut().zip(src.chunks_exact(2)) {
-                        *d =
-                            exr::prelude::f16::from_bits(u16::from_ne_bytes([s[0], s[1]])).to_f32();
-                    }
-                }
-                SampleType::F32 => {
-                    for (d, s) in dst.iter_mut().zip(src.chunks_exact(4)) {
-                        *d = f32::from_ne_bytes([s[0], s[1], s[2], s[3]]);
-                    }
-                }
-                SampleType::U32 => {
-                    for (d, s) in dst.iter_mut().zip(src.chunks_exact(4)) {
-                        *d = u32::from_ne_bytes([s[0], s[1], s[2], s[3]]) as f32;
-                    }
-                }
-            }
+            convert_line(c.sample_type, src, dst);
         }
     }
     if pos != data.len() {
@@ -892,20 +1050,41 @@ fn read_view(header: &Header) -> Result<Option<crate::View>> {
     }
 }
 
+/// [`colour::rgb_planes_to_xyz`] over the planes in pieces, in parallel with the `rayon`
+/// feature (each sample on its own: the same result as one call).
+fn rgb_planes_to_xyz_parallel(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
+    /// Samples per piece: our choice, large enough to make the per-piece cost negligible.
+    const PIECE: usize = 1 << 14;
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        r.par_chunks_mut(PIECE)
+            .zip(g.par_chunks_mut(PIECE))
+            .zip(b.par_chunks_mut(PIECE))
+            .for_each(|((r, g), b)| colour::rgb_planes_to_xyz(m, scale, r, g, b));
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        let _ = PIECE;
+        colour::rgb_planes_to_xyz(m, scale, r, g, b);
+    }
+}
+
 /// Build the [`HdrImage`] from the planes of `layout`.
 fn to_hdr(
     header: &Header,
     layout: &Layout,
-    mut planes: Vec<Vec<f32>>,
+    planes: Planes,
     width: usize,
     height: usize,
 ) -> Result<HdrImage> {
     let n = width * height;
+    let Planes { mut planes, xyz } = planes;
     let white_luminance = header
         .own_attributes
         .white_luminance
         .filter(|v| v.is_finite() && *v > 0.0);
-    let scale = white_luminance.map_or(1.0, f64::from);
+    let scale = white_scale(header);
     let mut image = HdrImage {
         width,
         height,
@@ -958,7 +1137,9 @@ fn to_hdr(
                     .unwrap_or_else(|| vec![0.0; n])
             };
             let (mut pr, mut pg, mut pb) = (take(r), take(g), take(b));
-            colour::rgb_planes_to_xyz(&m, scale, &mut pr, &mut pg, &mut pb);
+            if !xyz {
+                rgb_planes_to_xyz_parallel(&m, scale, &mut pr, &mut pg, &mut pb);
+            }
             (image.x, image.y, image.z) = (pr, pg, pb);
         }
         Layout::Yca { ry, by, .. } => {
