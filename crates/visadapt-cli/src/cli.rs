@@ -1089,6 +1089,24 @@ impl VideoFormat {
     }
 }
 
+/// PNG compression of `video` frames (both lossless: the same pixels).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PngLevel {
+    /// Adaptive row filter, then fdeflate: smaller files (the level of `map`).
+    Fast,
+    /// Up filter, then fdeflate: less CPU time per frame, larger files.
+    Fastest,
+}
+
+impl From<PngLevel> for visadapt::io::display::PngCompression {
+    fn from(level: PngLevel) -> Self {
+        match level {
+            PngLevel::Fast => Self::Fast,
+            PngLevel::Fastest => Self::Fastest,
+        }
+    }
+}
+
 /// A frame size, `WxH` (e.g. `1920x1080`).
 fn frame_size(s: &str) -> Result<(u64, u64), String> {
     let bad = || format!("{s}: a frame size is WIDTHxHEIGHT, e.g. 1920x1080");
@@ -1131,6 +1149,10 @@ pub struct VideoArgs {
     /// Format of the output frames.
     #[arg(long, value_enum, default_value_t = VideoFormat::Png)]
     pub format: VideoFormat,
+
+    /// Compression of PNG frames (lossless either way: the same pixels).
+    #[arg(long, value_enum, value_name = "LEVEL", default_value_t = PngLevel::Fast)]
+    pub png_compression: PngLevel,
 
     /// Multiply every frame's values by S to get cd/m² (one factor for all frames, so the
     /// changes between frames are kept).

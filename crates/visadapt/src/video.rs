@@ -68,6 +68,7 @@
 //! # Ok::<(), visadapt::Error>(())
 //! ```
 
+use crate::io::display::PngCompression;
 use crate::io::{self, OutputFormat};
 use crate::operator::{self, Mapping, PixelStats, Report, ViewingConditions};
 use crate::timecourse::Adaptation;
@@ -636,12 +637,24 @@ impl Source<Error> for FileFrames {
 pub struct FileSink {
     paths: Vec<PathBuf>,
     format: OutputFormat,
+    png: PngCompression,
 }
 
 impl FileSink {
     /// Frame `k` to `paths[k]`, in `format`.
     pub fn new(paths: Vec<PathBuf>, format: OutputFormat) -> Self {
-        FileSink { paths, format }
+        FileSink {
+            paths,
+            format,
+            png: PngCompression::Fast,
+        }
+    }
+
+    /// PNG frames at `png` compression ([`PngCompression::Fast`] unless set).
+    #[must_use]
+    pub fn with_png_compression(mut self, png: PngCompression) -> Self {
+        self.png = png;
+        self
     }
 
     /// Where frame `index` goes.
@@ -658,7 +671,7 @@ impl Sink<Error> for FileSink {
     type Frame = ();
 
     fn encode(&self, _index: u64, image: &DisplayImage, bytes: &mut Vec<u8>) -> Result<()> {
-        encode(image, self.format, bytes)
+        encode_with(image, self.format, self.png, bytes)
     }
 
     fn write(&self, index: u64, bytes: &[u8], (): ()) -> Result<()> {
@@ -669,9 +682,20 @@ impl Sink<Error> for FileSink {
 /// Encode a display image in `format` into `bytes` (its previous contents replaced, its
 /// memory reused): the file [`io::write_display`] would write, byte for byte.
 pub fn encode(image: &DisplayImage, format: OutputFormat, bytes: &mut Vec<u8>) -> Result<()> {
+    encode_with(image, format, PngCompression::Fast, bytes)
+}
+
+/// [`encode`] with PNGs at `png` compression (other formats are unaffected): with
+/// [`PngCompression::Fastest`], the same pixels in a larger file for less CPU time.
+pub fn encode_with(
+    image: &DisplayImage,
+    format: OutputFormat,
+    png: PngCompression,
+    bytes: &mut Vec<u8>,
+) -> Result<()> {
     bytes.clear();
     match format {
-        OutputFormat::Png { bits } => io::display::write_png(image, bits, &mut *bytes),
+        OutputFormat::Png { bits } => io::display::write_png_with(image, bits, png, &mut *bytes),
         OutputFormat::Jpeg { quality } => io::display::write_jpeg(image, quality, &mut *bytes),
         OutputFormat::Exr => io::exr::write_display(image, std::io::Cursor::new(&mut *bytes)),
         OutputFormat::Tiff => io::tiff::write_display(image, std::io::Cursor::new(&mut *bytes)),

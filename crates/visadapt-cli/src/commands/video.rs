@@ -298,6 +298,7 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         sink,
         frames,
         progress: progress.clone(),
+        png: args.png_compression.into(),
     };
     // The frame `k`-th of the run is (its number, the file it came from).
     let frame_of = |k: u64| -> (u64, PathBuf) {
@@ -509,6 +510,8 @@ struct Writer<'a> {
     /// The input frames (empty for a stream), to name a frame's file in errors.
     frames: &'a [(u64, PathBuf)],
     progress: ProgressBar,
+    /// Compression of PNG frames.
+    png: visadapt::io::display::PngCompression,
 }
 
 impl video::Sink<anyhow::Error> for Writer<'_> {
@@ -516,8 +519,8 @@ impl video::Sink<anyhow::Error> for Writer<'_> {
 
     fn encode(&self, k: u64, display: &DisplayImage, bytes: &mut Vec<u8>) -> anyhow::Result<()> {
         match self.sink {
-            Sink::Folder { format, .. } => {
-                video::encode(display, format, bytes).with_context(|| {
+            Sink::Folder { format, .. } => video::encode_with(display, format, self.png, bytes)
+                .with_context(|| {
                     let (n, input) = usize::try_from(k)
                         .ok()
                         .and_then(|k| self.frames.get(k))
@@ -525,8 +528,7 @@ impl video::Sink<anyhow::Error> for Writer<'_> {
                     self.sink
                         .path(input, n)
                         .map_or_else(|| format!("frame {k}"), |p| p.display().to_string())
-                })
-            }
+                }),
             Sink::Stream(raw) => io::raw::encode_frame(display, raw, bytes)
                 .with_context(|| format!("frame {k}: standard output")),
         }

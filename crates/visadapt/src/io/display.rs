@@ -73,14 +73,49 @@ fn par_pixels(out: &mut [u8], bytes_per_pixel: usize, f: impl Fn(usize, &mut [u8
     }
 }
 
-/// Write a PNG with `bits` (8 or 16) per channel, sRGB-encoded.
+/// How hard a PNG is compressed. Both are lossless (the decoded samples are the same);
+/// they differ in encoding time and file size only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PngCompression {
+    /// `png`'s `Compression::Fast`: the fdeflate encoder after the adaptive filter (each
+    /// row tried with the five PNG filters, the smallest kept). The default of
+    /// [`write_png`] and of every output of the library.
+    #[default]
+    Fast,
+    /// `png`'s `Compression::Fastest`: the same fdeflate encoder after the `Up` filter
+    /// alone (one filter per row instead of five tried), for video: less CPU time per
+    /// frame, larger files (see the README's "Performance: Video").
+    Fastest,
+}
+
+impl PngCompression {
+    fn png(self) -> png::Compression {
+        match self {
+            PngCompression::Fast => png::Compression::Fast,
+            PngCompression::Fastest => png::Compression::Fastest,
+        }
+    }
+}
+
+/// Write a PNG with `bits` (8 or 16) per channel, sRGB-encoded, at
+/// [`PngCompression::Fast`].
 pub fn write_png(image: &DisplayImage, bits: u8, w: impl Write) -> Result<()> {
+    write_png_with(image, bits, PngCompression::Fast, w)
+}
+
+/// [`write_png`] at the given compression.
+pub fn write_png_with(
+    image: &DisplayImage,
+    bits: u8,
+    compression: PngCompression,
+    w: impl Write,
+) -> Result<()> {
     image.validate_planes()?;
     let (width, height) = dims_u32(image)?;
     let mut enc = png::Encoder::new(w, width, height);
     enc.set_color(png::ColorType::Rgb);
     enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-    enc.set_compression(png::Compression::Fast);
+    enc.set_compression(compression.png());
     let data = match bits {
         8 => {
             enc.set_depth(png::BitDepth::Eight);
@@ -168,4 +203,66 @@ pub fn write_atomically(
         w.flush()?;
     }
     pending.commit()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A display image with gradients, noise-like detail and clipped areas.
+    fn picture(width: usize, height: usize) -> DisplayImage {
+        let n = width * height;
+        let value = |i: usize, k: u32| {
+            let (x, y) = ((i % width) as f32, (i / width) as f32);
+            let wave = ((x * 0.37 + y * 0.11 + k as f32).sin() * 0.5 + 0.5) * (y / height as f32);
+            let hash = (i as u32).wrapping_mul(2_654_435_761).wrapping_add(k) >> 24;
+            wave * 1.1 + hash as f32 / 2550.0 - 0.02
+        };
+        DisplayImage {
+            width,
+            height,
+            r: (0..n).map(|i| value(i, 0)).collect(),
+            g: (0..n).map(|i| value(i, 1)).collect(),
+            b: (0..n).map(|i| value(i, 2)).collect(),
+            display_max_cd_m2: 100.0,
+        }
+    }
+
+    fn decoded(png: &[u8]) -> (png::BitDepth, Vec<u8>) {
+        let mut reader = png::Decoder::new(std::io::Cursor::new(png))
+            .read_info()
+            .unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let frame = reader.next_frame(&mut buf).unwrap();
+        buf.truncate(frame.buffer_size());
+        (frame.bit_depth, buf)
+    }
+
+    /// Both compressions are lossless: the same samples, 8 and 16 bits, as the encoded
+    /// buffers; `Fastest` is a different file, `Fast` is `write_png`'s, byte for byte.
+    #[test]
+    fn every_png_compression_decodes_to_the_same_samples() {
+        let image = picture(97, 61);
+        for bits in [8, 16] {
+            let mut expected = Vec::new();
+            if bits == 8 {
+                expected = to_srgb8(&image);
+            } else {
+                srgb16_into(&image, true, &mut expected);
+            }
+            let mut plain = Vec::new();
+            write_png(&image, bits, &mut plain).unwrap();
+            let mut files = Vec::new();
+            for compression in [PngCompression::Fast, PngCompression::Fastest] {
+                let mut file = Vec::new();
+                write_png_with(&image, bits, compression, &mut file).unwrap();
+                let (depth, samples) = decoded(&file);
+                assert_eq!(depth as u8, bits, "{compression:?}");
+                assert_eq!(samples, expected, "{compression:?}, {bits} bits");
+                files.push(file);
+            }
+            assert_eq!(files[0], plain, "{bits} bits");
+            assert_ne!(files[1], plain, "{bits} bits");
+        }
+    }
 }
