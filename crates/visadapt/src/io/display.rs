@@ -239,7 +239,7 @@ mod tests {
     }
 
     /// Both compressions are lossless: the same samples, 8 and 16 bits, as the encoded
-    /// buffers; `Fastest` is a different file, `Fast` is `write_png`'s, byte for byte.
+    /// buffers; `Fast` is `write_png`'s file, byte for byte.
     #[test]
     fn every_png_compression_decodes_to_the_same_samples() {
         let image = picture(97, 61);
@@ -262,7 +262,6 @@ mod tests {
                 files.push(file);
             }
             assert_eq!(files[0], plain, "{bits} bits");
-            assert_ne!(files[1], plain, "{bits} bits");
         }
     }
 }
