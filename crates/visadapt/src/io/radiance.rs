@@ -1066,6 +1066,19 @@ mod tests {
     use super::*;
     use crate::colour::{REC709, mul_vec};
 
+    /// Knuth's MMIX linear congruential generator (multiplier 6364136223846793005,
+    /// increment 1442695040888963407), its high 31 bits per call: reproducible noise for
+    /// the tests, no statistical quality needed.
+    fn lcg(seed: u64) -> impl FnMut() -> usize {
+        let mut s = seed;
+        move || {
+            s = s
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (s >> 33) as usize
+        }
+    }
+
     /// Radiance's Y row for its default primaries (`color.h`, `CIE_rf`, `CIE_gf`,
     /// `CIE_bf`): luminance = 179 × (0.265074 R + 0.670115 G + 0.064811 B). `color.h`
     /// derives them from a white of (0.3333, 0.3333) where `colour::RADIANCE_DEFAULT` uses
@@ -1789,13 +1802,7 @@ mod tests {
             base.extend(rle(row));
         }
         let base = file(&["#?RADIANCE"], "-Y 3 +X 10", &base);
-        let mut s = 42u64;
-        let mut rand = || {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (s >> 33) as usize
-        };
+        let mut rand = lcg(42);
         for _ in 0..20_000 {
             let mut f = base.clone();
             for _ in 0..1 + rand() % 4 {
@@ -1914,13 +1921,8 @@ mod tests {
     /// `w × h` pseudo-random pixels with runs of equal components (so that run-length
     /// scanlines hold both runs and literals), some black, and no `1 1 1` or `2 2` pixels.
     fn varied_pixels(w: usize, h: usize, seed: u64) -> Vec<[u8; 4]> {
-        let mut s = seed;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (s >> 33) as u8
-        };
+        let mut rand = lcg(seed);
+        let mut next = || rand() as u8;
         let mut px = Vec::with_capacity(w * h);
         let mut current = [100u8, 90, 80, 130];
         for _ in 0..w * h {
@@ -2058,13 +2060,7 @@ mod tests {
         }
         // Random bytes changed in the scanlines: the same image or the same error.
         let start = file(&["#?RADIANCE"], &axes, &[]).len();
-        let mut s = 5u64;
-        let mut rand = || {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (s >> 33) as usize
-        };
+        let mut rand = lcg(5);
         let mut errors = 0;
         for _ in 0..3000 {
             let mut f = if rand() % 2 == 0 {
