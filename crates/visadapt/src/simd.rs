@@ -139,6 +139,93 @@ fn with_avx2_fma<R>(f: impl FnOnce() -> R) -> R {
     f()
 }
 
+/// Rows in a tile of [`column_tile_avx512`].
+pub(crate) const TILE_ROWS: usize = 4;
+/// Input rows a tile of [`column_tile_avx512`] can read: [`TILE_ROWS`] plus twice the
+/// largest radius 10 (28 vectors with the accumulators, within AVX-512's 32 registers).
+pub(crate) const TILE_INPUTS: usize = TILE_ROWS + 20;
+/// Columns of a tile of [`column_tile_avx512`] (a block of the blur's pass down the ring).
+pub(crate) const TILE_COLUMNS: usize = 128;
+
+/// The symmetric kernel `taps[0..=R]` (centre first) down `TILE_ROWS` output rows of
+/// `TILE_COLUMNS` columns at once, with AVX-512: output row `k` is
+/// `taps[0]·rows[k + R] + Σ_j taps[j]·(rows[k + R − j] + rows[k + R + j])`, accumulated
+/// in the order of `blur::fir::tap_sum` with fused multiply-adds (so bit for bit its
+/// result on the FMA levels), written to `out[at + k·width..][..TILE_COLUMNS]`. Each
+/// input vector is loaded once for all four output rows and held in a register.
+///
+/// # Panics
+/// If the processor lacks AVX-512F, or `R > 10`, or `out` is too short.
+pub(crate) fn column_tile_avx512<const R: usize>(
+    taps: &[f32; 11],
+    rows: &[&[f32; TILE_COLUMNS]; TILE_INPUTS],
+    out: &mut [f32],
+    at: usize,
+    width: usize,
+) {
+    const { assert!(TILE_ROWS + 2 * R <= TILE_INPUTS) };
+    assert!(
+        Isa::best() == Isa::Avx512Fma,
+        "AVX-512 kernels requested on a processor without them"
+    );
+    assert!(out.len() >= at + (TILE_ROWS - 1) * width + TILE_COLUMNS);
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: `column_tile_kernel` only requires AVX-512F, AVX2 and FMA, checked above.
+    unsafe {
+        column_tile_kernel::<R>(taps, rows, out, at, width)
+    }
+}
+
+/// [`column_tile_avx512`] compiled for AVX-512.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn column_tile_kernel<const R: usize>(
+    taps: &[f32; 11],
+    rows: &[&[f32; TILE_COLUMNS]; TILE_INPUTS],
+    out: &mut [f32],
+    at: usize,
+    width: usize,
+) {
+    use std::arch::x86_64::{
+        __m512, _mm512_add_ps, _mm512_fmadd_ps, _mm512_loadu_ps, _mm512_mul_ps, _mm512_set1_ps,
+        _mm512_setzero_ps, _mm512_storeu_ps,
+    };
+    const LANES: usize = 16;
+    let load = |v: &[f32; LANES]| -> __m512 {
+        // SAFETY: `v` is 16 readable floats; the enclosing function has AVX-512F.
+        unsafe { _mm512_loadu_ps(v.as_ptr()) }
+    };
+    let h: [__m512; 11] = taps.map(|t| _mm512_set1_ps(t));
+    for c in (0..TILE_COLUMNS).step_by(LANES) {
+        let mut xs = [_mm512_setzero_ps(); TILE_INPUTS];
+        for (x, row) in xs.iter_mut().zip(rows).take(TILE_ROWS + 2 * R) {
+            *x = load(row[c..c + LANES].try_into().expect("a vector"));
+        }
+        let mut acc: [__m512; TILE_ROWS] = std::array::from_fn(|k| _mm512_mul_ps(h[0], xs[k + R]));
+        // The taps written out (a loop over them was left rolled at R = 9 and 10, its
+        // inputs then kept in memory); `j ≤ R` is decided at compile time.
+        macro_rules! taps {
+            ($($j:literal)*) => {$(
+                if $j <= R {
+                    for (k, acc) in acc.iter_mut().enumerate() {
+                        let pair = _mm512_add_ps(xs[k + R - $j], xs[k + R + $j]);
+                        *acc = _mm512_fmadd_ps(h[$j], pair, *acc);
+                    }
+                }
+            )*};
+        }
+        const { assert!(R <= 10) };
+        taps!(1 2 3 4 5 6 7 8 9 10);
+        for (k, acc) in acc.into_iter().enumerate() {
+            let dst: &mut [f32; LANES] = (&mut out[at + k * width + c..][..LANES])
+                .try_into()
+                .expect("a vector");
+            // SAFETY: `dst` is 16 writable floats; the enclosing function has AVX-512F.
+            unsafe { _mm512_storeu_ps(dst.as_mut_ptr(), acc) }
+        }
+    }
+}
+
 /// `a·b + c`, fused (one rounding) when `FMA`.
 #[inline(always)]
 pub(crate) fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {

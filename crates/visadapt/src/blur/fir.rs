@@ -13,7 +13,7 @@
 //! unique symmetric 3-tap kernel `[a, 1 − 2a, a]` with `2a = σ²`. The taps are all
 //! positive, so the output is a convex combination of input samples.
 
-use crate::simd::madd;
+use crate::simd::{self, madd};
 
 /// Radius of the kernel for `sigma`: at least 4σ, at least 1.
 pub(crate) fn radius(sigma: f64) -> usize {
@@ -261,7 +261,15 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
             let base = p * m * stride;
             for c0 in (0..w).step_by(COLUMN_BLOCK) {
                 let c1 = (c0 + COLUMN_BLOCK).min(w);
-                for (k, offs) in offsets.chunks_exact(n).take(count).enumerate() {
+                // The AVX-512 build computes the block's rows in tiles that keep their
+                // ring rows in registers; the rows it leaves go the common way.
+                let tiled = if L == LANES_AVX512 && height > 1 {
+                    let out = &mut plane[(o - a) * w..];
+                    column_tiles(half, ring, base, &offsets, count, out, w, c0..c1)
+                } else {
+                    0
+                };
+                for (k, offs) in offsets.chunks_exact(n).take(count).enumerate().skip(tiled) {
                     let row = &mut plane[(o + k - a) * w..][c0..c1];
                     if height > 1 {
                         convolve::<FMA, L>(
@@ -286,6 +294,82 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
     acc
 }
 
+/// The largest kernel radius [`column_tiles`] handles (see [`simd::TILE_INPUTS`]);
+/// wider kernels go the common way.
+const TILE_MAX_RADIUS: usize = (simd::TILE_INPUTS - simd::TILE_ROWS) / 2;
+
+/// The pass down the ring for the columns `cols` of the first rows of a group, in tiles
+/// of [`simd::TILE_ROWS`] output rows of a whole [`COLUMN_BLOCK`] whose
+/// `TILE_ROWS + 2R` input vectors are each loaded once and held in registers
+/// ([`simd::column_tile_avx512`]): the common way loads the `2r + 1` inputs of every
+/// output vector from the L1 cache (19 loads at R = 9 against 5.5), and its loads, not
+/// its arithmetic, bounded it. Every output goes through the operations of [`tap_sum`]
+/// in its order, so the result is the same bit for bit (tested). `offsets` are those of
+/// [`segment`] (per output row of the group, its `2r + 1` ring rows), `out` the group's
+/// output rows (`width` apart). Returns how many of the group's `count` rows it wrote
+/// (0 for a partial block or a radius above [`TILE_MAX_RADIUS`]). AVX-512 only.
+#[allow(clippy::too_many_arguments)]
+fn column_tiles(
+    half: &[f32],
+    ring: &[f32],
+    base: usize,
+    offsets: &[usize],
+    count: usize,
+    out: &mut [f32],
+    width: usize,
+    cols: std::ops::Range<usize>,
+) -> usize {
+    macro_rules! radii {
+        ($($r:literal)*) => {
+            match half.len() - 1 {
+                $($r => tiles::<$r>(half, ring, base, offsets, count, out, width, cols),)*
+                _ => 0,
+            }
+        };
+    }
+    const _: () = assert!(TILE_MAX_RADIUS == 10);
+    radii!(1 2 3 4 5 6 7 8 9 10)
+}
+
+/// [`column_tiles`] for the radius `R`.
+#[allow(clippy::too_many_arguments)]
+fn tiles<const R: usize>(
+    half: &[f32],
+    ring: &[f32],
+    base: usize,
+    offsets: &[usize],
+    count: usize,
+    out: &mut [f32],
+    width: usize,
+    cols: std::ops::Range<usize>,
+) -> usize {
+    use simd::{TILE_INPUTS, TILE_ROWS};
+    if cols.len() != COLUMN_BLOCK {
+        return 0;
+    }
+    let n = 2 * R + 1;
+    let taps: [f32; TILE_MAX_RADIUS + 1] = std::array::from_fn(|j| half[j.min(R)]);
+    let mut k0 = 0;
+    while k0 + TILE_ROWS <= count {
+        // Input row t of the tile (output row k0 + k reads t = k + R + d) in the block;
+        // the entries past the tile's last are not read.
+        let rows: [&[f32; COLUMN_BLOCK]; TILE_INPUTS] = std::array::from_fn(|t| {
+            let t = t.min(TILE_ROWS + 2 * R - 1);
+            let (k, j) = if t < n {
+                (k0, t)
+            } else {
+                (k0 + t + 1 - n, n - 1)
+            };
+            ring[base + offsets[k * n + j] + cols.start..][..COLUMN_BLOCK]
+                .try_into()
+                .expect("a block")
+        });
+        simd::column_tile_avx512::<R>(&taps, &rows, out, k0 * width + cols.start, width);
+        k0 += TILE_ROWS;
+    }
+    k0
+}
+
 /// The ring and padded rows of a segment, kept by each thread from one pass to the next
 /// (fresh memory for every pass costs page faults: about 1 MiB per 1080p frame).
 struct Scratch(Vec<f32>);
@@ -297,7 +381,7 @@ const GROUP: usize = 8;
 /// Columns per block of the pass down the ring: a multiple of every block width of
 /// [`convolve`], small enough that the `2r + GROUP` ring rows of a block (at most 24 KiB
 /// at r = 20, 13 KiB at r = 9) stay in a 48 KiB L1 cache.
-const COLUMN_BLOCK: usize = 128;
+const COLUMN_BLOCK: usize = simd::TILE_COLUMNS;
 
 /// Samples per cache line (64 bytes).
 const ALIGN: usize = 16;
