@@ -13,7 +13,7 @@
 //! unique symmetric 3-tap kernel `[a, 1 − 2a, a]` with `2a = σ²`. The taps are all
 //! positive, so the output is a convex combination of input samples.
 
-use crate::simd::madd;
+use crate::simd::{Isa, madd};
 
 /// Radius of the kernel for `sigma`: at least 4σ, at least 1.
 pub(crate) fn radius(sigma: f64) -> usize {
@@ -261,7 +261,15 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
             let base = p * m * stride;
             for c0 in (0..w).step_by(COLUMN_BLOCK) {
                 let c1 = (c0 + COLUMN_BLOCK).min(w);
-                for (k, offs) in offsets.chunks_exact(n).take(count).enumerate() {
+                // The AVX-512 build computes the block's rows in tiles that keep their
+                // ring rows in registers; the rows it leaves go the common way.
+                let tiled = if L == LANES_AVX512 && height > 1 {
+                    let out = &mut plane[(o - a) * w..];
+                    column_tiles(half, ring, base, &offsets, count, out, w, c0..c1)
+                } else {
+                    0
+                };
+                for (k, offs) in offsets.chunks_exact(n).take(count).enumerate().skip(tiled) {
                     let row = &mut plane[(o + k - a) * w..][c0..c1];
                     if height > 1 {
                         convolve::<FMA, L>(
@@ -284,6 +292,122 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
     }
     scratch.give_back();
     acc
+}
+
+/// Output rows of one tile of [`column_tiles`].
+const TILE_ROWS: usize = 4;
+/// Columns of one tile of [`column_tiles`]: one AVX-512 vector.
+const TILE_LANES: usize = 16;
+/// Largest kernel radius [`column_tiles`] handles: a tile's `TILE_ROWS + 2R` input
+/// vectors and `TILE_ROWS` accumulators must fit the 32 vector registers of AVX-512
+/// (28 at R = 10); wider kernels go the common way.
+const TILE_MAX_RADIUS: usize = 10;
+/// Input rows of a tile of the widest radius.
+const TILE_INPUTS: usize = TILE_ROWS + 2 * TILE_MAX_RADIUS;
+
+/// The pass down the ring for the columns `cols` of the first rows of a group, in tiles
+/// of [`TILE_ROWS`] output rows × [`TILE_LANES`] columns of a whole [`COLUMN_BLOCK`],
+/// whose `TILE_ROWS + 2R` input vectors are each loaded once and held in registers: the
+/// common way loads the `2r + 1` inputs of every output vector from the L1 cache (19
+/// loads at R = 9 against 5.5), and its loads, not its arithmetic, bounded it. Every
+/// output goes through the operations of [`tap_sum`] in its order, so the result is the
+/// same bit for bit (tested). `offsets` are those of [`segment`] (per output row of the
+/// group, its `2r + 1` ring rows), `out` the group's output rows (`width` apart).
+/// Returns how many of the group's `count` rows it wrote (0 for a partial block or a
+/// radius above [`TILE_MAX_RADIUS`]).
+///
+/// Compiled for AVX-512 with fused multiply-adds, one target-feature function per
+/// radius (inlined into [`segment`], the ten of them kept it from being inlined into
+/// its own); only [`segment`]'s AVX-512 build calls it.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+fn column_tiles(
+    half: &[f32],
+    ring: &[f32],
+    base: usize,
+    offsets: &[usize],
+    count: usize,
+    out: &mut [f32],
+    width: usize,
+    cols: std::ops::Range<usize>,
+) -> usize {
+    if cols.len() != COLUMN_BLOCK {
+        return 0;
+    }
+    macro_rules! radii {
+        ($($r:literal)*) => {
+            match half.len() - 1 {
+                $($r => Isa::Avx512Fma.run(|| {
+                    tiles::<$r>(half, ring, base, offsets, count, out, width, cols.start)
+                }),)*
+                _ => 0,
+            }
+        };
+    }
+    const _: () = assert!(TILE_MAX_RADIUS == 10);
+    radii!(1 2 3 4 5 6 7 8 9 10)
+}
+
+/// [`column_tiles`] for the radius `R` and a whole block from column `c0`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn tiles<const R: usize>(
+    half: &[f32],
+    ring: &[f32],
+    base: usize,
+    offsets: &[usize],
+    count: usize,
+    out: &mut [f32],
+    width: usize,
+    c0: usize,
+) -> usize {
+    let n = 2 * R + 1;
+    let taps: [f32; TILE_MAX_RADIUS + 1] = std::array::from_fn(|j| half[j.min(R)]);
+    let mut k0 = 0;
+    while k0 + TILE_ROWS <= count {
+        // Input row t of the tile (output row k0 + k reads t = k + R + d) in the block,
+        // as arrays so that no load needs a bounds check; the entries past the tile's
+        // last input are not read.
+        let rows: [&[f32; COLUMN_BLOCK]; TILE_INPUTS] = std::array::from_fn(|t| {
+            let t = t.min(TILE_ROWS + 2 * R - 1);
+            let (k, j) = if t < n {
+                (k0, t)
+            } else {
+                (k0 + t + 1 - n, n - 1)
+            };
+            ring[base + offsets[k * n + j] + c0..][..COLUMN_BLOCK]
+                .try_into()
+                .expect("a block")
+        });
+        for v in 0..COLUMN_BLOCK / TILE_LANES {
+            let c = v * TILE_LANES;
+            let x = |t: usize| -> [f32; TILE_LANES] {
+                *<&[f32; TILE_LANES]>::try_from(&rows[t][c..c + TILE_LANES]).expect("a vector")
+            };
+            let mut acc: [[f32; TILE_LANES]; TILE_ROWS] =
+                std::array::from_fn(|k| x(k + R).map(|v| taps[0] * v));
+            // The taps written out (a loop over them was left rolled at R = 9 and 10,
+            // its inputs then reloaded); `j ≤ R` is decided at compile time.
+            macro_rules! taps {
+                ($($j:literal)*) => {$(
+                    if $j <= R {
+                        for (k, acc) in acc.iter_mut().enumerate() {
+                            let (lo, hi) = (x(k + R - $j), x(k + R + $j));
+                            for l in 0..TILE_LANES {
+                                acc[l] = madd::<true>(taps[$j], lo[l] + hi[l], acc[l]);
+                            }
+                        }
+                    }
+                )*};
+            }
+            taps!(1 2 3 4 5 6 7 8 9 10);
+            for (k, acc) in acc.iter().enumerate() {
+                out[(k0 + k) * width + c0 + c..][..TILE_LANES].copy_from_slice(acc);
+            }
+        }
+        k0 += TILE_ROWS;
+    }
+    k0
 }
 
 /// The ring and padded rows of a segment, kept by each thread from one pass to the next

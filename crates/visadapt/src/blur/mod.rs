@@ -1231,7 +1231,8 @@ mod tests {
             (8, 200),
         ] {
             let src = test_image(w, h);
-            for sigma in [0.2f32, 0.45, 1.0, 2.19, 2.99, 4.38, 4.99] {
+            // Radii 1, 2, 4, 6, 9, 10 (the AVX-512 column tiles' range), 12, 18, 20.
+            for sigma in [0.2f32, 0.45, 1.0, 1.5, 2.19, 2.4, 2.99, 4.38, 4.99] {
                 for isa in Isa::all_available() {
                     for exec in [Exec::Sequential, Exec::Parallel] {
                         let mut v = src.clone();
