@@ -13,6 +13,11 @@ mod signals;
 use clap::Parser;
 use std::process::ExitCode;
 
+/// Image-sized buffers on transparent huge pages (`visadapt::pages`): a 1080p `map` spent
+/// half its CPU time in page faults on 4 KiB pages.
+#[global_allocator]
+static ALLOCATOR: visadapt::pages::HugePages = visadapt::pages::HugePages;
+
 fn main() -> ExitCode {
     quiet_on_broken_pipe();
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))

@@ -9,7 +9,10 @@
 //!   the calling thread);
 //! * `io/decode/exr_rle_float/1920x1080`: X, Y, Z 32-bit floats, RLE (what
 //!   `visadapt::io::exr::write_hdr` writes);
-//! * `io/decode/hdr/1920x1080`: Radiance RGBE, run-length scanlines.
+//! * `io/decode/hdr/1920x1080`: Radiance RGBE, run-length scanlines;
+//! * `io/decode_into/…`: the same five, decoded into one image whose planes are reused
+//!   (`visadapt::io::exr::decode_into`, `visadapt::io::radiance::decode_into`), as
+//!   `visadapt video` reads its frames.
 //!
 //! Criterion reports pixels per second (one element a pixel).
 //!
@@ -124,6 +127,25 @@ fn bench(c: &mut Criterion) {
     for (name, bytes) in &files {
         group.bench_function(BenchmarkId::new(*name, &size), |b| {
             b.iter(|| visadapt::io::decode(bytes, &limits).unwrap())
+        });
+    }
+    group.finish();
+
+    // The same files decoded into one image whose planes are reused from frame to frame,
+    // as `visadapt video` does (`visadapt::io::read_into`).
+    let mut group = c.benchmark_group("io/decode_into");
+    group.sample_size(20);
+    group.throughput(Throughput::Elements((WIDTH * HEIGHT) as u64));
+    for (name, bytes) in &files {
+        let mut image = visadapt::io::decode(bytes, &limits).unwrap();
+        let decode_into: fn(&[u8], &Limits, &mut visadapt::HdrImage) -> visadapt::Result<()> =
+            if *name == "hdr" {
+                visadapt::io::radiance::decode_into
+            } else {
+                visadapt::io::exr::decode_into
+            };
+        group.bench_function(BenchmarkId::new(*name, &size), |b| {
+            b.iter(|| decode_into(bytes, &limits, &mut image).unwrap())
         });
     }
     group.finish();

@@ -51,6 +51,7 @@ pub mod local;
 pub mod mesopic;
 pub mod observer;
 pub mod operator;
+pub mod pages;
 pub mod preview;
 #[cfg(feature = "json")]
 pub mod report;

@@ -67,8 +67,8 @@ pub fn read(path: &Path, limits: &Limits) -> Result<HdrImage> {
 }
 
 /// [`read`] into existing buffers, reusing their memory (for a sequence of frames):
-/// `bytes` receives the file's bytes, `image` the decoded image (Radiance files are
-/// decoded into its planes, see [`radiance::decode_into`]).
+/// `bytes` receives the file's bytes, `image` the decoded image (Radiance and OpenEXR files
+/// are decoded into its planes, see [`radiance::decode_into`] and [`exr::decode_into`]).
 pub fn read_into(
     path: &Path,
     limits: &Limits,
@@ -77,6 +77,7 @@ pub fn read_into(
 ) -> Result<()> {
     match read_bytes(path, limits, bytes)? {
         InputFormat::Radiance => radiance::decode_into(bytes, limits, image),
+        InputFormat::OpenExr => exr::decode_into(bytes, limits, image),
         _ => {
             *image = decode(bytes, limits)?;
             Ok(())

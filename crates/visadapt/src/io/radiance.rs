@@ -128,6 +128,11 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
 /// `scotopic = None`, `absolute_units = true`, `adopted_white` = the white of the
 /// `PRIMARIES=`, E by default); on error its contents are unspecified.
 pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Result<()> {
+    decode_with(bytes, limits, image, true)
+}
+
+/// [`decode_into`], with the parallel decoder allowed or not (the tests compare the two).
+fn decode_with(bytes: &[u8], limits: &Limits, image: &mut HdrImage, parallel: bool) -> Result<()> {
     let (header, after_header) = parse_header(bytes)?;
     let (res, data_start) = parse_resolution(bytes, after_header)?;
     let n = limits.check(FORMAT, res.width, res.height)?;
@@ -161,6 +166,30 @@ pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Resul
     image.absolute_units = true;
     image.adopted_white = colour::is_valid_white(header.white).then_some(header.white);
     let (x, y, z) = (&mut image.x, &mut image.y, &mut image.z);
+
+    // Row-major files (all the usual ones) are decoded in parallel once a serial walk has
+    // found where each scanline starts; a file the walk does not vouch for (damaged, or
+    // with old-style repeat records) takes the serial decoder below, which reports its
+    // errors.
+    #[cfg(feature = "rayon")]
+    if parallel
+        && res.y_major
+        && height >= 2 * PARALLEL_ROWS
+        && let Some(starts) = scanline_starts(data, scan_count, scan_len)
+    {
+        let rows = Rows {
+            data,
+            starts: &starts,
+            width,
+            height,
+            y_decreasing: res.y_decreasing,
+            x_decreasing: res.x_decreasing,
+            conv: &conv,
+        };
+        return rows.decode_parallel(x, y, z);
+    }
+    #[cfg(not(feature = "rayon"))]
+    let _ = parallel;
 
     // Every output sample is written exactly once: scanline s, position i maps
     // one-to-one onto (row, column) for each of the eight orientations. Scanlines that
@@ -208,6 +237,132 @@ pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Resul
         }
     }
     Ok(())
+}
+
+/// Scanlines per parallel task (our choice: 1080 rows make 68 tasks, enough to balance two
+/// to eight threads, each task long enough, ~0.3 ms, to make the scheduling cost
+/// negligible).
+#[cfg(feature = "rayon")]
+const PARALLEL_ROWS: usize = 16;
+
+/// The start of every scanline, and the end of the last, found by a walk over the
+/// run-length codes that does not decode them: `None` when some scanline is not plainly
+/// one of the two common kinds (a new-style run-length scanline whose codes fit it, or
+/// `len` flat pixels without an old-style repeat record), or the data ends early. Then
+/// the serial decoder runs instead (a repeat record continues the pixels before it, so
+/// its scanline's length is only known by decoding it; and it reports the errors).
+#[cfg(feature = "rayon")]
+fn scanline_starts(data: &[u8], count: usize, len: usize) -> Option<Vec<usize>> {
+    let mut starts = Vec::with_capacity(count + 1);
+    let mut pos = 0usize;
+    starts.push(pos);
+    for _ in 0..count {
+        pos = skip_scanline(data, pos, len)?;
+        starts.push(pos);
+    }
+    Some(starts)
+}
+
+/// Where the scanline of `len` pixels at `data[pos..]` ends, when it is a whole run-length
+/// scanline (the same test as [`read_scanline`]) or `len` flat pixels without a repeat
+/// record; `None` otherwise.
+#[cfg(feature = "rayon")]
+fn skip_scanline(data: &[u8], pos: usize, len: usize) -> Option<usize> {
+    let rest = data.get(pos..)?;
+    if (MIN_RLE_LEN..=MAX_RLE_LEN).contains(&len)
+        && let [2, 2, hi, lo, ..] = *rest
+        && hi & 0x80 == 0
+    {
+        if usize::from(hi) << 8 | usize::from(lo) != len {
+            return None;
+        }
+        // The four components' codes, as `read_rle` reads them.
+        let mut p = pos + 4;
+        for _ in 0..4 {
+            let mut j = 0usize;
+            while j < len {
+                let code = *data.get(p)?;
+                let n = if code > 128 {
+                    p += 2;
+                    usize::from(code - 128)
+                } else if code == 0 {
+                    return None;
+                } else {
+                    p += 1 + usize::from(code);
+                    usize::from(code)
+                };
+                j += n;
+            }
+            if j != len {
+                return None;
+            }
+        }
+        (p <= data.len()).then_some(p)
+    } else {
+        let block = rest.get(..len.checked_mul(4)?)?;
+        let repeat = block.chunks_exact(4).fold(false, |acc, rec| {
+            acc | (u32::from_le_bytes([rec[0], rec[1], rec[2], rec[3]]) & 0x00ff_ffff == 0x01_0101)
+        });
+        (!repeat).then_some(pos + 4 * len)
+    }
+}
+
+/// A row-major picture whose scanline starts are known, to decode in parallel.
+#[cfg(feature = "rayon")]
+struct Rows<'a> {
+    data: &'a [u8],
+    /// From [`scanline_starts`]: `height + 1` offsets into `data`.
+    starts: &'a [usize],
+    width: usize,
+    height: usize,
+    y_decreasing: bool,
+    x_decreasing: bool,
+    conv: &'a Converter,
+}
+
+#[cfg(feature = "rayon")]
+impl Rows<'_> {
+    /// Decode every scanline into its row of `x`, `y`, `z` (each `width × height`), in
+    /// tasks of [`PARALLEL_ROWS`] rows; the same values, bit for bit, as the serial
+    /// decoder. The first error in row order is returned (none is expected: the walk has
+    /// checked every scanline's codes).
+    fn decode_parallel(&self, x: &mut [f32], y: &mut [f32], z: &mut [f32]) -> Result<()> {
+        use rayon::prelude::*;
+        let step = PARALLEL_ROWS * self.width;
+        let results: Vec<Result<()>> = x
+            .par_chunks_mut(step)
+            .zip(y.par_chunks_mut(step))
+            .zip(z.par_chunks_mut(step))
+            .enumerate()
+            .map(|(task, ((x, y), z))| {
+                let mut scan = vec![0u8; 4 * self.width];
+                let rows = x
+                    .chunks_exact_mut(self.width)
+                    .zip(y.chunks_exact_mut(self.width))
+                    .zip(z.chunks_exact_mut(self.width));
+                for (k, ((x, y), z)) in rows.enumerate() {
+                    let row = task * PARALLEL_ROWS + k;
+                    // `-Y` runs top to bottom.
+                    let s = if self.y_decreasing {
+                        row
+                    } else {
+                        self.height - 1 - row
+                    };
+                    let mut pos = self.starts[s];
+                    read_scanline(self.data, &mut pos, &mut scan, self.width)?;
+                    if pos != self.starts[s + 1] {
+                        return Err(Error::decode(FORMAT, "scanline ends out of place"));
+                    }
+                    if self.x_decreasing {
+                        scan.chunks_exact_mut(self.width).for_each(<[u8]>::reverse);
+                    }
+                    self.conv.convert(&scan, x, y, z);
+                }
+                Ok(())
+            })
+            .collect();
+        results.into_iter().collect()
+    }
 }
 
 /// Most bytes one pixel can take in a scanline: seven 4-byte records (the pixel and up to
@@ -1726,5 +1881,226 @@ mod tests {
         );
         assert_eq!(img.y[0], f32::MAX);
         close(img.z[1], expected_rgbe([0, 0, 1, 1])[2], 1e-3, "tiny Z");
+    }
+
+    /// Decode `bytes` with the serial decoder and with the parallel one: both must give
+    /// the same image bit for bit, or the same error.
+    fn serial_and_parallel(bytes: &[u8]) -> Result<HdrImage> {
+        let run = |parallel| {
+            let mut image = HdrImage::zeros(0, 0);
+            decode_with(bytes, &Limits::default(), &mut image, parallel).map(|()| image)
+        };
+        let (serial, parallel) = (run(false), run(true));
+        match (&serial, &parallel) {
+            (Ok(a), Ok(b)) => {
+                assert_eq!(
+                    (a.width, a.height, a.view, a.adopted_white),
+                    (b.width, b.height, b.view, b.adopted_white)
+                );
+                for (pa, pb) in [(&a.x, &b.x), (&a.y, &b.y), (&a.z, &b.z)] {
+                    assert!(
+                        pa.iter()
+                            .map(|v| v.to_bits())
+                            .eq(pb.iter().map(|v| v.to_bits()))
+                    );
+                }
+            }
+            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
+            _ => panic!("serial {serial:?} but parallel {parallel:?}"),
+        }
+        parallel
+    }
+
+    /// `w × h` pseudo-random pixels with runs of equal components (so that run-length
+    /// scanlines hold both runs and literals), some black, and no `1 1 1` or `2 2` pixels.
+    fn varied_pixels(w: usize, h: usize, seed: u64) -> Vec<[u8; 4]> {
+        let mut s = seed;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (s >> 33) as u8
+        };
+        let mut px = Vec::with_capacity(w * h);
+        let mut current = [100u8, 90, 80, 130];
+        for _ in 0..w * h {
+            match next() % 8 {
+                0 => current = [0; 4],
+                1..=3 => current = [next() | 8, next() | 8, next() | 8, 120 + next() % 16],
+                _ => {}
+            }
+            px.push(current);
+        }
+        px
+    }
+
+    /// The `2 + h`-offset scanline data of `px` (`w` wide) in the row order of a
+    /// resolution line `-Y`/`+Y` and column order `+X`/`-X`, every row encoded by `enc`.
+    fn scanlines(
+        px: &[[u8; 4]],
+        w: usize,
+        y_dec: bool,
+        x_dec: bool,
+        enc: impl Fn(usize, &[[u8; 4]]) -> Vec<u8>,
+    ) -> Vec<u8> {
+        let h = px.len() / w;
+        let mut data = Vec::new();
+        for s in 0..h {
+            let row = if y_dec { s } else { h - 1 - s };
+            let mut line = px[row * w..(row + 1) * w].to_vec();
+            if x_dec {
+                line.reverse();
+            }
+            data.extend(enc(s, &line));
+        }
+        data
+    }
+
+    #[cfg(feature = "rayon")]
+    #[test]
+    fn parallel_rows_equal_serial_rows() {
+        let (w, h) = (37usize, 45usize);
+        let px = varied_pixels(w, h, 7);
+        let reference = decode_ok(&file(
+            &["#?RADIANCE"],
+            &format!("-Y {h} +X {w}"),
+            &flat(&px),
+        ));
+        for (y_dec, x_dec, axes) in [
+            (true, false, format!("-Y {h} +X {w}")),
+            (false, false, format!("+Y {h} +X {w}")),
+            (true, true, format!("-Y {h} -X {w}")),
+            (false, true, format!("+Y {h} -X {w}")),
+        ] {
+            // All run-length, all flat, and mixed scanlines.
+            for (kind, data) in [
+                ("rle", scanlines(&px, w, y_dec, x_dec, |_, l| rle(l))),
+                ("flat", scanlines(&px, w, y_dec, x_dec, |_, l| flat(l))),
+                (
+                    "mixed",
+                    scanlines(&px, w, y_dec, x_dec, |s, l| {
+                        if s % 3 == 0 { flat(l) } else { rle(l) }
+                    }),
+                ),
+            ] {
+                // The walk vouches for these scanlines: the parallel path is the one tested.
+                assert!(scanline_starts(&data, h, w).is_some(), "{axes} {kind}");
+                let img = serial_and_parallel(&file(&["#?RADIANCE"], &axes, &data)).unwrap();
+                assert_eq!(img, reference, "{axes} {kind}");
+                // Exposure and colour correction folded into the matrix, on both paths.
+                let header = ["#?RADIANCE", "EXPOSURE=0.37", "COLORCORR=1 0.9 1.1"];
+                let img = serial_and_parallel(&file(&header, &axes, &data)).unwrap();
+                close(img.y[5], f64::from(reference.y[5]) / 0.37, 1e-6, "exposure");
+            }
+        }
+    }
+
+    #[cfg(feature = "rayon")]
+    #[test]
+    fn old_style_repeats_take_the_serial_decoder() {
+        let (w, h) = (37usize, 40usize);
+        let px = varied_pixels(w, h, 11);
+        // Row 20 as a pixel and one repeat record for the next 36.
+        let data = scanlines(&px, w, true, false, |s, l| {
+            if s == 20 {
+                let mut v = l[0].to_vec();
+                v.extend([1, 1, 1, 36]);
+                v
+            } else {
+                rle(l)
+            }
+        });
+        assert!(scanline_starts(&data, h, w).is_none());
+        let img =
+            serial_and_parallel(&file(&["#?RADIANCE"], &format!("-Y {h} +X {w}"), &data)).unwrap();
+        let row = &img.y[20 * w..21 * w];
+        assert!(row.iter().all(|v| v.to_bits() == row[0].to_bits()));
+        // A row whose first pixel reads as a repeat record: an error either way.
+        let data = scanlines(&px, w, true, false, |s, l| {
+            let mut v = flat(l);
+            if s == 30 {
+                v[..3].copy_from_slice(&[1, 1, 1]);
+            }
+            v
+        });
+        let err = serial_and_parallel(&file(&["#?RADIANCE"], &format!("-Y {h} +X {w}"), &data));
+        assert!(
+            err.unwrap_err()
+                .to_string()
+                .contains("repeat record with no pixel")
+        );
+    }
+
+    #[cfg(feature = "rayon")]
+    #[test]
+    fn damaged_files_fail_alike_serial_and_parallel() {
+        let (w, h) = (23usize, 36usize);
+        let px = varied_pixels(w, h, 3);
+        let axes = format!("-Y {h} +X {w}");
+        let rle_file = file(
+            &["#?RADIANCE"],
+            &axes,
+            &scanlines(&px, w, true, false, |_, l| rle(l)),
+        );
+        let mixed = file(
+            &["#?RADIANCE"],
+            &axes,
+            &scanlines(&px, w, true, false, |s, l| {
+                if s % 2 == 0 { flat(l) } else { rle(l) }
+            }),
+        );
+        for f in [&rle_file, &mixed] {
+            serial_and_parallel(f).unwrap();
+            // Every truncation.
+            for cut in 0..f.len() {
+                assert!(serial_and_parallel(&f[..cut]).is_err(), "cut at {cut}");
+            }
+        }
+        // Random bytes changed in the scanlines: the same image or the same error.
+        let start = file(&["#?RADIANCE"], &axes, &[]).len();
+        let mut s = 5u64;
+        let mut rand = || {
+            s = s
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (s >> 33) as usize
+        };
+        let mut errors = 0;
+        for _ in 0..3000 {
+            let mut f = if rand() % 2 == 0 {
+                rle_file.clone()
+            } else {
+                mixed.clone()
+            };
+            for _ in 0..1 + rand() % 3 {
+                let i = start + rand() % (f.len() - start);
+                f[i] = match rand() % 4 {
+                    0 => 0,
+                    1 => 1,
+                    2 => 2,
+                    _ => rand() as u8,
+                };
+            }
+            errors += usize::from(serial_and_parallel(&f).is_err());
+        }
+        // Some changes break a code, others only change a value: both outcomes compared.
+        assert!((1..3000).contains(&errors), "{errors} errors");
+    }
+
+    #[cfg(feature = "rayon")]
+    #[test]
+    fn parallel_decoder_on_real_pictures() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+        for name in ["mixtex.hdr", "sunset-fisheye.hdr"] {
+            let bytes = std::fs::read(dir.join(name)).unwrap();
+            let img = serial_and_parallel(&bytes).unwrap();
+            assert!(img.y.iter().any(|v| *v > 0.0), "{name}");
+        }
+        if let Some(shared) = std::env::var_os("VISADAPT_SHARED_DATA") {
+            let bytes =
+                std::fs::read(std::path::Path::new(&shared).join("radiance/office-fisheye.hdr"))
+                    .unwrap();
+            serial_and_parallel(&bytes).unwrap();
+        }
     }
 }

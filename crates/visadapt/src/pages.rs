@@ -1,0 +1,372 @@
+//! A global allocator that puts the large buffers of an image (planes, encoded files) on
+//! transparent huge pages, for programs built on the library (the `visadapt` command
+//! installs it; a program of its own opts in with `#[global_allocator]`).
+//!
+//! Why: every fresh page of memory a process touches costs a page fault, in which the
+//! kernel clears the page. One 1920×1080 `map` touches about 36 MiB of fresh memory
+//! (the decoded planes, the mapped planes, the encoded file): 9.3 thousand faults of
+//! 4 KiB pages, which took 47 of its 95 ms of CPU time on the 2-core virtual machine the
+//! README's figures come from (`perf stat -e page-faults,task-clock`). A 2 MiB huge page
+//! is one fault where 4 KiB pages take 512; clearing the memory costs the same, the
+//! faults' overhead goes.
+//!
+//! How: an allocation of at least [`HUGE_PAGE`] bytes is its own anonymous mapping,
+//! aligned to 2 MiB and marked `MADV_HUGEPAGE` (the kernel's setting
+//! `/sys/kernel/mm/transparent_hugepage/enabled` is `madvise` on most distributions,
+//! which gives huge pages only to memory so marked). The
+//! kernel hands out such memory already zeroed, so zeroed allocations (`vec![0.0; n]`)
+//! are not cleared a second time. Smaller allocations, and every allocation off Linux,
+//! go to the system allocator unchanged. A freed mapping is kept for the next allocation
+//! of its size (a few of them, bounded: see `spares`), so that buffers allocated over and
+//! over do not fault in fresh pages each time. A mapping that fails is reported as an
+//! allocation failure, as the system allocator's would be; advice the kernel refuses
+//! (huge pages switched off) only loses the speed.
+//!
+//! Memory use: a mapping is a whole number of huge pages, each resident whole (2 MiB)
+//! once touched, so a buffer takes less than 2 MiB more than its size.
+//!
+//! This module and `simd` (the runtime CPU dispatch) hold the crate's only `unsafe` code.
+#![allow(unsafe_code)]
+
+use std::alloc::{GlobalAlloc, Layout, System};
+
+/// The size of a transparent huge page on x86-64 and on most aarch64 kernels (2 MiB, the
+/// size of the memory one second-level page-table entry maps), and the smallest
+/// allocation placed on its own mapping.
+pub const HUGE_PAGE: usize = 2 << 20;
+
+/// The global allocator described in the [module documentation](self): allocations of
+/// at least [`HUGE_PAGE`] bytes on transparent huge pages (Linux), all others, and all
+/// allocations elsewhere, from [`System`].
+///
+/// ```
+/// #[global_allocator]
+/// static ALLOCATOR: visadapt::pages::HugePages = visadapt::pages::HugePages;
+///
+/// let plane = vec![0.0f32; 1920 * 1080];
+/// assert!(plane.iter().all(|&v| v == 0.0));
+/// ```
+#[derive(Debug, Default, Clone, Copy)]
+pub struct HugePages;
+
+/// Whether an allocation of `layout` gets its own huge-page mapping. Decided from the
+/// layout alone, so that `dealloc` takes the path `alloc` took.
+#[inline]
+fn own_mapping(layout: &Layout) -> bool {
+    cfg!(target_os = "linux") && layout.size() >= HUGE_PAGE && layout.align() <= HUGE_PAGE
+}
+
+// SAFETY (the whole impl): allocations routed to `System` are `System`'s, with the caller's
+// layouts unchanged. Allocations with their own mapping are `len` bytes of a private
+// anonymous mapping starting at a 2 MiB boundary; `len >= layout.size()` and the start is
+// aligned to 2 MiB, hence to `layout.align()` (checked by `own_mapping`). `dealloc` gets
+// the same layout as `alloc` (the `GlobalAlloc` contract), recomputes the same `len` and
+// unmaps exactly that range. Nothing here allocates.
+unsafe impl GlobalAlloc for HugePages {
+    #[inline]
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if own_mapping(&layout) {
+            spares::take(layout.size()).unwrap_or_else(|| map_huge(layout.size()))
+        } else {
+            // SAFETY: the caller's contract, passed on.
+            unsafe { System.alloc(layout) }
+        }
+    }
+
+    #[inline]
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        if own_mapping(&layout) {
+            match spares::take(layout.size()) {
+                // SAFETY: a spare mapping of at least `layout.size()` bytes, now ours.
+                Some(p) => unsafe {
+                    p.write_bytes(0, layout.size());
+                    p
+                },
+                // Fresh anonymous memory reads as zero.
+                None => map_huge(layout.size()),
+            }
+        } else {
+            // SAFETY: the caller's contract, passed on.
+            unsafe { System.alloc_zeroed(layout) }
+        }
+    }
+
+    #[inline]
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        if own_mapping(&layout) {
+            if !spares::keep(ptr, layout.size()) {
+                unmap(ptr, layout.size());
+            }
+        } else {
+            // SAFETY: `ptr` came from `System` with this layout (same routing as alloc).
+            unsafe { System.dealloc(ptr, layout) }
+        }
+    }
+
+    #[inline]
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        // SAFETY: the caller guarantees `new_size` with `layout.align()` is a valid layout.
+        let new_layout = unsafe { Layout::from_size_align_unchecked(new_size, layout.align()) };
+        if !own_mapping(&layout) && !own_mapping(&new_layout) {
+            // SAFETY: both on `System`: its realloc, with the caller's contract.
+            return unsafe { System.realloc(ptr, layout, new_size) };
+        }
+        // Crossing to, from or between own mappings: new block, copy, free the old one.
+        // SAFETY: `new_size` is non-zero (the caller's contract), as `alloc` requires.
+        let new = unsafe { self.alloc(new_layout) };
+        if !new.is_null() {
+            // SAFETY: both blocks are valid for the smaller size and do not overlap.
+            unsafe {
+                std::ptr::copy_nonoverlapping(ptr, new, layout.size().min(new_size));
+                self.dealloc(ptr, layout);
+            }
+        }
+        new
+    }
+}
+
+/// Freed mappings kept for the next allocation of the same length, so that a program
+/// that allocates and frees image-sized buffers over and over (a batch of frames, the
+/// viewer's renders, the passes of one `map`) reuses memory whose pages are already
+/// there instead of faulting in fresh ones, as the system allocator does by keeping
+/// freed blocks of up to 32 MiB in its heap.
+///
+/// Bounded: at most [`SLOTS`](spares::SLOTS) mappings are kept, and an allocation that
+/// finds none of its length first unmaps all that are kept, so that the process never
+/// holds more memory (live and kept) than it held live at some earlier moment.
+mod spares {
+    use std::sync::Mutex;
+
+    /// How many freed mappings are kept. Our choice: more than the planes of one image
+    /// (an HDR image's four, a display image's three).
+    pub(super) const SLOTS: usize = 8;
+
+    /// A kept mapping: its start and the size it was allocated for (0: an empty slot).
+    #[derive(Clone, Copy)]
+    struct Spare(*mut u8, usize);
+
+    // SAFETY: a kept mapping belongs to no one until `take` hands it out; the pointer is
+    // only moved between threads under the mutex, never dereferenced there.
+    unsafe impl Send for Spare {}
+
+    static KEPT: Mutex<[Spare; SLOTS]> = Mutex::new([Spare(std::ptr::null_mut(), 0); SLOTS]);
+
+    /// A kept mapping made for `size` bytes, or `None` after unmapping every kept one.
+    pub(super) fn take(size: usize) -> Option<*mut u8> {
+        let mut dropped = [Spare(std::ptr::null_mut(), 0); SLOTS];
+        {
+            // Nothing here panics while the lock is held; a poisoned lock is still usable.
+            let mut kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
+            if let Some(slot) = kept.iter_mut().find(|s| s.1 == size) {
+                let p = slot.0;
+                *slot = Spare(std::ptr::null_mut(), 0);
+                return Some(p);
+            }
+            std::mem::swap(&mut *kept, &mut dropped);
+        }
+        for spare in dropped.iter().filter(|s| s.1 > 0) {
+            super::unmap(spare.0, spare.1);
+        }
+        None
+    }
+
+    /// How many mappings are kept now.
+    #[cfg(test)]
+    pub(super) fn count() -> usize {
+        let kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
+        kept.iter().filter(|s| s.1 > 0).count()
+    }
+
+    /// Keep the mapping at `ptr`, made for `size` bytes; `false` when every slot is full
+    /// (the caller unmaps it).
+    pub(super) fn keep(ptr: *mut u8, size: usize) -> bool {
+        let mut kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
+        match kept.iter_mut().find(|s| s.1 == 0) {
+            Some(slot) => {
+                *slot = Spare(ptr, size);
+                true
+            }
+            None => false,
+        }
+    }
+}
+
+/// The length of the mapping that holds `size` bytes: whole huge pages, so that the tail
+/// of a buffer is on a huge page too (a 1920×1080 plane of `f32` is 3.96 huge pages; on
+/// small pages its last 1.9 MiB alone took 490 faults).
+#[cfg(target_os = "linux")]
+fn mapping_len(size: usize) -> usize {
+    size.next_multiple_of(HUGE_PAGE)
+}
+
+/// A private anonymous mapping of at least `size` bytes starting at a 2 MiB boundary,
+/// marked for huge pages; null when the kernel refuses the memory.
+#[cfg(target_os = "linux")]
+fn map_huge(size: usize) -> *mut u8 {
+    use rustix::mm::{Advice, MapFlags, ProtFlags, madvise, mmap_anonymous, munmap};
+    let Some(len) = size.checked_next_multiple_of(HUGE_PAGE) else {
+        return std::ptr::null_mut();
+    };
+    let Some(reserve) = len.checked_add(HUGE_PAGE) else {
+        return std::ptr::null_mut();
+    };
+    // SAFETY: a new mapping at an address of the kernel's choosing touches no existing
+    // memory.
+    let Ok(base) = (unsafe {
+        mmap_anonymous(
+            std::ptr::null_mut(),
+            reserve,
+            ProtFlags::READ | ProtFlags::WRITE,
+            MapFlags::PRIVATE,
+        )
+    }) else {
+        return std::ptr::null_mut();
+    };
+    let base = base.cast::<u8>();
+    let head = (base as usize).next_multiple_of(HUGE_PAGE) - base as usize;
+    let start = base.wrapping_add(head);
+    let tail = reserve - head - len;
+    // SAFETY: the head and the tail are the parts of the new mapping outside
+    // [start, start + len), page-aligned (base, len and HUGE_PAGE are), owned by no one.
+    unsafe {
+        if head > 0 {
+            let _ = munmap(base.cast(), head);
+        }
+        if tail > 0 {
+            let _ = munmap(start.wrapping_add(len).cast(), tail);
+        }
+        // Advice only: without huge pages the memory is still valid.
+        let _ = madvise(start.cast(), len, Advice::LinuxHugepage);
+    }
+    start
+}
+
+/// Unmap what [`map_huge`] mapped for `size` bytes at `ptr`.
+#[cfg(target_os = "linux")]
+fn unmap(ptr: *mut u8, size: usize) {
+    // SAFETY: `ptr` and the length are those of a mapping made by `map_huge(size)` and
+    // not yet unmapped (the `dealloc` contract).
+    unsafe {
+        let _ = rustix::mm::munmap(ptr.cast(), mapping_len(size));
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn map_huge(_: usize) -> *mut u8 {
+    unreachable!("own mappings are made on Linux only")
+}
+
+#[cfg(not(target_os = "linux"))]
+fn unmap(_: *mut u8, _: usize) {
+    unreachable!("own mappings are made on Linux only")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fill(ptr: *mut u8, len: usize) {
+        // SAFETY: callers pass a live block of at least `len` bytes.
+        let s = unsafe { std::slice::from_raw_parts_mut(ptr, len) };
+        for (i, b) in s.iter_mut().enumerate() {
+            *b = (i % 251) as u8;
+        }
+    }
+
+    fn holds_pattern(ptr: *const u8, len: usize) -> bool {
+        // SAFETY: callers pass a live block of at least `len` bytes.
+        let s = unsafe { std::slice::from_raw_parts(ptr, len) };
+        s.iter().enumerate().all(|(i, &b)| b == (i % 251) as u8)
+    }
+
+    /// Blocks on both sides of the threshold are aligned as asked, zeroed when asked, and
+    /// keep their contents when reallocated across the threshold in both directions.
+    /// The tests share the kept mappings; they run one at a time.
+    static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+    #[test]
+    fn blocks_keep_their_contents_across_the_threshold() {
+        let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+        let a = HugePages;
+        let cases = [
+            (64, 8),
+            (HUGE_PAGE - 1, 64),
+            (HUGE_PAGE, 4096),
+            (3 * HUGE_PAGE + 5, 16),
+        ];
+        for (size, align) in cases {
+            let layout = Layout::from_size_align(size, align).unwrap();
+            for new_size in [size / 2 + 1, 2 * size + HUGE_PAGE] {
+                // SAFETY: non-zero sizes; every block is freed with the layout it has.
+                unsafe {
+                    let p = a.alloc_zeroed(layout);
+                    assert!(!p.is_null());
+                    assert_eq!(p as usize % align, 0, "{size}");
+                    assert!(std::slice::from_raw_parts(p, size).iter().all(|&b| b == 0));
+                    fill(p, size);
+                    let q = a.realloc(p, layout, new_size);
+                    assert!(!q.is_null());
+                    assert!(holds_pattern(q, size.min(new_size)), "{size} -> {new_size}");
+                    let new_layout = Layout::from_size_align(new_size, align).unwrap();
+                    fill(q, new_size);
+                    let r = a.realloc(q, new_layout, size);
+                    assert!(!r.is_null());
+                    assert!(holds_pattern(r, size.min(new_size)), "{new_size} -> {size}");
+                    a.dealloc(r, layout);
+                }
+            }
+        }
+    }
+
+    /// A large block is its own mapping, starting on a 2 MiB boundary and marked for huge
+    /// pages (`hg` in the mapping's `VmFlags` in `/proc/self/smaps`, whatever the
+    /// system's huge-page setting); freed, it is kept and handed out again for the same
+    /// size, and an allocation of another size unmaps what is kept.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_large_block_is_an_aligned_mapping_advised_for_huge_pages_and_reused() {
+        let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+        let flags_of = |addr: usize| -> Option<String> {
+            let smaps = std::fs::read_to_string("/proc/self/smaps").unwrap();
+            let mut inside = false;
+            for line in smaps.lines() {
+                if let Some((range, _)) = line.split_once(' ')
+                    && let Some((lo, hi)) = range.split_once('-')
+                    && let (Ok(lo), Ok(hi)) =
+                        (usize::from_str_radix(lo, 16), usize::from_str_radix(hi, 16))
+                {
+                    inside = (lo..hi).contains(&addr);
+                } else if inside && let Some(flags) = line.strip_prefix("VmFlags:") {
+                    return Some(flags.to_string());
+                }
+            }
+            None
+        };
+        let a = HugePages;
+        let layout = Layout::from_size_align(5 * HUGE_PAGE + 123, 4).unwrap();
+        let other = Layout::from_size_align(7 * HUGE_PAGE, 4).unwrap();
+        // SAFETY: non-zero sizes, each block freed with its layout.
+        unsafe {
+            let p = a.alloc(layout);
+            assert!(!p.is_null());
+            assert_eq!(p as usize % HUGE_PAGE, 0);
+            let flags = flags_of(p as usize).expect("the block is mapped");
+            assert!(flags.split_whitespace().any(|f| f == "hg"), "{flags}");
+            p.write_bytes(7, layout.size());
+            a.dealloc(p, layout);
+            assert!(spares::count() >= 1);
+            let q = a.alloc_zeroed(layout);
+            assert_eq!(q, p, "the freed mapping is reused");
+            assert!(
+                std::slice::from_raw_parts(q, layout.size())
+                    .iter()
+                    .all(|&b| b == 0)
+            );
+            a.dealloc(q, layout);
+            let r = a.alloc(other);
+            assert!(!r.is_null());
+            assert_eq!(spares::count(), 0, "a miss unmaps what is kept");
+            a.dealloc(r, other);
+        }
+    }
+}
