@@ -4,9 +4,23 @@
 
 use super::output::PendingFile;
 use crate::colour::Srgb8;
+use crate::simd::Isa;
 use crate::{DisplayImage, Error, Result};
 use std::io::Write;
 use std::path::Path;
+
+/// `$body` compiled for the instruction-set level `$isa` ([`Isa::run`]), one closure per
+/// level so that each is compiled inside its target-feature function (a single closure
+/// run at a level chosen at run time is compiled once, for the baseline).
+macro_rules! at_level {
+    ($isa:expr, $body:expr) => {
+        match $isa {
+            Isa::Avx512Fma => Isa::Avx512Fma.run(|| $body),
+            Isa::Avx2Fma => Isa::Avx2Fma.run(|| $body),
+            Isa::Baseline => $body,
+        }
+    };
+}
 
 mod bands;
 
@@ -21,13 +35,16 @@ pub fn to_srgb8(image: &DisplayImage) -> Vec<u8> {
 /// [`to_srgb8`] into `out` (its contents replaced, its memory reused).
 pub(crate) fn srgb8_into(image: &DisplayImage, out: &mut Vec<u8>) {
     let enc = Srgb8::get();
+    let isa = Isa::detect();
     out.resize(image.len() * 3, 0);
     par_pixels(out, 3, |start, px| {
-        for (i, px) in px.chunks_exact_mut(3).enumerate() {
-            px[0] = enc.encode(image.r[start + i]);
-            px[1] = enc.encode(image.g[start + i]);
-            px[2] = enc.encode(image.b[start + i]);
-        }
+        let end = start + px.len() / 3;
+        let (r, g, b) = (
+            &image.r[start..end],
+            &image.g[start..end],
+            &image.b[start..end],
+        );
+        at_level!(isa, enc.encode_rgb(r, g, b, px));
     });
 }
 

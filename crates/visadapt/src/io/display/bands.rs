@@ -86,7 +86,10 @@ pub(super) fn zlib_pieces(
     let isa = Isa::detect();
     let band = |k: usize| {
         let rows = k * rows_per_band..((k + 1) * rows_per_band).min(image.height);
-        isa.run(|| encode_band(image, bits, settings, rows, k == 0, k + 1 == bands))
+        at_level!(
+            isa,
+            encode_band(image, bits, settings, rows.clone(), k == 0, k + 1 == bands)
+        )
     };
     #[cfg(feature = "rayon")]
     let segments: Vec<Result<Segment, String>> = {
@@ -120,27 +123,13 @@ fn encode_band(
 ) -> Result<Segment, String> {
     let bpp = if bits == 8 { 3 } else { 6 };
     let row_bytes = image.width * bpp;
-    let encode_row = |y: usize, out: &mut [u8]| {
-        let start = y * image.width;
-        let end = start + image.width;
-        let (r, g, b) = (
-            &image.r[start..end],
-            &image.g[start..end],
-            &image.b[start..end],
-        );
-        if bits == 8 {
-            srgb8_row(r, g, b, out);
-        } else {
-            srgb16_row(r, g, b, out);
-        }
-    };
     let mut prev = vec![0u8; row_bytes];
     let mut cur = vec![0u8; row_bytes];
     // The filter type byte, then the filtered row; a second one for the adaptive trials.
     let mut best = vec![0u8; row_bytes + 1];
     let mut trial = vec![0u8; row_bytes + 1];
     if rows.start > 0 {
-        encode_row(rows.start - 1, &mut prev);
+        encode_row(image, bits, rows.start - 1, &mut prev);
     }
     let raw_len = (row_bytes + 1) * rows.len();
     let mut out = Output::new(zlib_rs::compress_bound(raw_len) + 64, first);
@@ -153,7 +142,7 @@ fn encode_band(
     });
     let mut adler = 1u32;
     for y in rows.clone() {
-        encode_row(y, &mut cur);
+        encode_row(image, bits, y, &mut cur);
         match settings.filtering {
             Filtering::Up => {
                 best[0] = 2;
@@ -176,6 +165,23 @@ fn encode_band(
         adler,
         filtered_len: raw_len as u64,
     })
+}
+
+/// Row `y` of `image` as sRGB codes, interleaved RGB (`bits` 8 or 16, big-endian).
+#[inline(always)]
+fn encode_row(image: &DisplayImage, bits: u8, y: usize, out: &mut [u8]) {
+    let start = y * image.width;
+    let end = start + image.width;
+    let (r, g, b) = (
+        &image.r[start..end],
+        &image.g[start..end],
+        &image.b[start..end],
+    );
+    if bits == 8 {
+        srgb8_row(r, g, b, out);
+    } else {
+        srgb16_row(r, g, b, out);
+    }
 }
 
 /// A growing output buffer for a compressor (kept initialised: the crate has no `unsafe`
@@ -237,12 +243,7 @@ impl Output {
 /// A row of 8-bit sRGB codes, interleaved RGB.
 #[inline(always)]
 fn srgb8_row(r: &[f32], g: &[f32], b: &[f32], out: &mut [u8]) {
-    let enc = Srgb8::get();
-    for (((px, &r), &g), &b) in out.chunks_exact_mut(3).zip(r).zip(g).zip(b) {
-        px[0] = enc.encode(r);
-        px[1] = enc.encode(g);
-        px[2] = enc.encode(b);
-    }
+    Srgb8::get().encode_rgb(r, g, b, out);
 }
 
 /// A row of 16-bit sRGB codes, interleaved RGB, big-endian.
