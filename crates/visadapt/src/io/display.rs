@@ -288,6 +288,27 @@ mod tests {
         }
     }
 
+    /// The threads' compressors are reused from band to band and image to image (reset,
+    /// or made anew for another level): a file is the same, byte for byte, whatever was
+    /// encoded before it.
+    #[test]
+    fn reused_compressors_write_the_same_files() {
+        let (a, b) = (picture(300, 1000), picture(1031, 257));
+        let file = |image: &DisplayImage, bits, compression| {
+            let mut f = Vec::new();
+            write_png_with(image, bits, compression, &mut f).unwrap();
+            f
+        };
+        let first = file(&a, 8, PngCompression::Fast);
+        for compression in [PngCompression::Fastest, PngCompression::Fast] {
+            for bits in [16, 8] {
+                let _ = file(&b, bits, compression);
+            }
+        }
+        assert!(first == file(&a, 8, PngCompression::Fast));
+        assert!(first != file(&a, 8, PngCompression::Fastest));
+    }
+
     /// The zlib stream of a PNG file: its IDAT chunks' data, concatenated.
     fn idat(png: &[u8]) -> Vec<u8> {
         let mut rest = &png[8..];

@@ -111,6 +111,15 @@ pub(super) fn zlib_pieces(
     Ok(pieces)
 }
 
+thread_local! {
+    /// Each thread's compressor, reset for each band (a new one allocates and clears
+    /// about 320 KiB at zlib's default memory level: window, hash chains, pending buffer),
+    /// with the level and strategy
+    /// it was made for.
+    static COMPRESSOR: std::cell::Cell<Option<(Deflate, (i32, Strategy))>> =
+        const { std::cell::Cell::new(None) };
+}
+
 /// Encode, filter and deflate `rows` of `image`.
 #[inline(always)]
 fn encode_band(
@@ -121,8 +130,41 @@ fn encode_band(
     first: bool,
     last: bool,
 ) -> Result<Segment, String> {
+    let key = (settings.level, settings.strategy);
+    let mut deflate = match COMPRESSOR.take() {
+        Some((mut deflate, made_for)) if made_for == key => {
+            deflate.reset();
+            deflate
+        }
+        _ => Deflate::new_with_config(DeflateConfig {
+            level: settings.level,
+            // Negative: raw deflate, no zlib header or trailer (zlib's convention).
+            window_bits: -15,
+            strategy: settings.strategy,
+            ..DeflateConfig::default()
+        }),
+    };
+    let segment = deflate_rows(image, bits, settings, rows, first, last, &mut deflate);
+    if segment.is_ok() {
+        COMPRESSOR.set(Some((deflate, key)));
+    }
+    segment
+}
+
+/// [`encode_band`] with a compressor ready for a new stream.
+#[inline(always)]
+fn deflate_rows(
+    image: &DisplayImage,
+    bits: u8,
+    settings: Settings,
+    rows: std::ops::Range<usize>,
+    first: bool,
+    last: bool,
+    deflate: &mut Deflate,
+) -> Result<Segment, String> {
     let bpp = if bits == 8 { 3 } else { 6 };
     let row_bytes = image.width * bpp;
+    let raw_len = (row_bytes + 1) * rows.len();
     let mut prev = vec![0u8; row_bytes];
     let mut cur = vec![0u8; row_bytes];
     // The filter type byte, then the filtered row; a second one for the adaptive trials.
@@ -131,15 +173,9 @@ fn encode_band(
     if rows.start > 0 {
         encode_row(image, bits, rows.start - 1, &mut prev);
     }
-    let raw_len = (row_bytes + 1) * rows.len();
-    let mut out = Output::new(zlib_rs::compress_bound(raw_len) + 64, first);
-    let mut deflate = Deflate::new_with_config(DeflateConfig {
-        level: settings.level,
-        // Negative: raw deflate, no zlib header or trailer (zlib's convention).
-        window_bits: -15,
-        strategy: settings.strategy,
-        ..DeflateConfig::default()
-    });
+    // A quarter of the raw size to start with: grown as needed (level 1 output of a
+    // mapped frame is 10-30 % of it), so little is zero-filled in advance.
+    let mut out = Output::new(raw_len / 4 + 64, first);
     let mut adler = 1u32;
     for y in rows.clone() {
         encode_row(image, bits, y, &mut cur);
@@ -151,7 +187,7 @@ fn encode_band(
             Filtering::Adaptive => adaptive(bpp, &prev, &cur, &mut best, &mut trial),
         }
         adler = zlib_rs::adler32::adler32(adler, &best);
-        out.deflate(&mut deflate, &best, DeflateFlush::NoFlush)?;
+        out.deflate(deflate, &best, DeflateFlush::NoFlush)?;
         std::mem::swap(&mut prev, &mut cur);
     }
     let flush = if last {
@@ -159,7 +195,7 @@ fn encode_band(
     } else {
         DeflateFlush::SyncFlush
     };
-    out.deflate(&mut deflate, &[], flush)?;
+    out.deflate(deflate, &[], flush)?;
     Ok(Segment {
         bytes: out.into_bytes(),
         adler,
