@@ -59,6 +59,11 @@ impl Settings {
                 level: 1,
                 strategy: Strategy::Default,
             },
+            PngCompression::Rle => Settings {
+                filtering: Filtering::Up,
+                level: 1,
+                strategy: Strategy::Rle,
+            },
         }
     }
 }
