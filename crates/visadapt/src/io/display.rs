@@ -53,22 +53,16 @@ pub(crate) fn srgb8_into(image: &DisplayImage, out: &mut Vec<u8>) {
 /// encoded in parallel.
 pub(crate) fn srgb16_into(image: &DisplayImage, big_endian: bool, out: &mut Vec<u8>) {
     let lut = bands::srgb16_lut();
-    let bytes = |v: f32| {
-        let c = lut.encode(v);
-        if big_endian {
-            c.to_be_bytes()
-        } else {
-            c.to_le_bytes()
-        }
-    };
+    let isa = Isa::detect();
     out.resize(image.len() * 6, 0);
     par_pixels(out, 6, |start, px| {
-        for (i, px) in px.chunks_exact_mut(6).enumerate() {
-            let i = start + i;
-            px[0..2].copy_from_slice(&bytes(image.r[i]));
-            px[2..4].copy_from_slice(&bytes(image.g[i]));
-            px[4..6].copy_from_slice(&bytes(image.b[i]));
-        }
+        let end = start + px.len() / 6;
+        let (r, g, b) = (
+            &image.r[start..end],
+            &image.g[start..end],
+            &image.b[start..end],
+        );
+        at_level!(isa, lut.encode_rgb(r, g, b, big_endian, px));
     });
 }
 

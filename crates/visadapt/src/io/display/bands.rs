@@ -290,12 +290,7 @@ fn srgb8_row(r: &[f32], g: &[f32], b: &[f32], out: &mut [u8]) {
 /// A row of 16-bit sRGB codes, interleaved RGB, big-endian.
 #[inline(always)]
 fn srgb16_row(r: &[f32], g: &[f32], b: &[f32], out: &mut [u8]) {
-    let lut = srgb16_lut();
-    for (((px, &r), &g), &b) in out.chunks_exact_mut(6).zip(r).zip(g).zip(b) {
-        px[0..2].copy_from_slice(&lut.encode(r).to_be_bytes());
-        px[2..4].copy_from_slice(&lut.encode(g).to_be_bytes());
-        px[4..6].copy_from_slice(&lut.encode(b).to_be_bytes());
-    }
+    srgb16_lut().encode_rgb(r, g, b, true, out);
 }
 
 /// The shared 16-bit table (see [`SrgbLut`]).
