@@ -1089,13 +1089,17 @@ impl VideoFormat {
     }
 }
 
-/// PNG compression of `video` frames (both lossless: the same pixels).
+/// PNG compression of `video` frames (all lossless: the same pixels), each encoded in
+/// parallel row bands (see `visadapt::io::display::PngCompression`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum PngLevel {
-    /// Adaptive row filter, then fdeflate: smaller files (the level of `map`).
+    /// Adaptive row filter, then deflate level 1 (the level of `map`).
     Fast,
-    /// Up filter, then fdeflate: less CPU time per frame, larger files.
+    /// Up filter, then deflate level 1: the least CPU time per frame, the largest files.
     Fastest,
+    /// Up filter, then run-length deflate: about the CPU time of fast, files 36-44 %
+    /// smaller (the default: 24 1080p frames in 7.3 MB against 12.0 MB at fast).
+    Rle,
 }
 
 impl From<PngLevel> for visadapt::io::display::PngCompression {
@@ -1103,6 +1107,7 @@ impl From<PngLevel> for visadapt::io::display::PngCompression {
         match level {
             PngLevel::Fast => Self::Fast,
             PngLevel::Fastest => Self::Fastest,
+            PngLevel::Rle => Self::Rle,
         }
     }
 }
@@ -1150,8 +1155,8 @@ pub struct VideoArgs {
     #[arg(long, value_enum, default_value_t = VideoFormat::Png)]
     pub format: VideoFormat,
 
-    /// Compression of PNG frames (lossless either way: the same pixels).
-    #[arg(long, value_enum, value_name = "LEVEL", default_value_t = PngLevel::Fast)]
+    /// Compression of PNG frames (lossless at every level: the same pixels).
+    #[arg(long, value_enum, value_name = "LEVEL", default_value_t = PngLevel::Rle)]
     pub png_compression: PngLevel,
 
     /// Multiply every frame's values by S to get cd/m² (one factor for all frames, so the

@@ -641,16 +641,22 @@ pub struct FileSink {
 }
 
 impl FileSink {
-    /// Frame `k` to `paths[k]`, in `format`.
+    /// Frame `k` to `paths[k]`, in `format`; PNG frames at [`PngCompression::Rle`], the
+    /// video default: the whole `visadapt video` process on the 24 1080p frames of the
+    /// office sequence, interleaved with the same build at `Fastest` (4 pairs each, load
+    /// about 5 on two cores), took the same CPU time (Radiance frames 0.79 against
+    /// 0.82 s, OpenEXR 1.32 against 1.33 s) for files 44 % and 42 % smaller (7.29 against
+    /// 13.10 MB, 14.12 against 24.26 MB; `Fast`: 11.99 and 22.02 MB). Smaller files also
+    /// take less time to write and sync.
     pub fn new(paths: Vec<PathBuf>, format: OutputFormat) -> Self {
         FileSink {
             paths,
             format,
-            png: PngCompression::Fast,
+            png: PngCompression::Rle,
         }
     }
 
-    /// PNG frames at `png` compression ([`PngCompression::Fast`] unless set).
+    /// PNG frames at `png` compression ([`PngCompression::Rle`] unless set).
     #[must_use]
     pub fn with_png_compression(mut self, png: PngCompression) -> Self {
         self.png = png;

@@ -1,0 +1,403 @@
+//! A PNG's image data (the zlib stream of its IDAT chunks) encoded in parallel row bands.
+//!
+//! Each band of rows is sRGB-encoded, filtered and deflated on its own (a `rayon` task
+//! with the `rayon` feature): the first row of a band is filtered against the row above
+//! it (encoded once more for that), so the filtered bytes are exactly those of one
+//! sequential pass. Each band is deflated into raw DEFLATE blocks (RFC 1951) by its own
+//! compressor, ended with a sync flush (an empty stored block: the segment ends on a byte
+//! boundary, its back-references stay inside it) except the last band, which ends with
+//! the final block. The segments, after the two-byte zlib header (RFC 1950 §2.2) and
+//! followed by the Adler-32 of all filtered bytes (the bands' sums combined), are one
+//! valid zlib stream; each band's segment is written as its own IDAT chunk (PNG 1.2 §4.1.3
+//! allows several, their data concatenated), so nothing is copied to join them.
+
+use super::PngCompression;
+use crate::DisplayImage;
+use crate::colour::{Srgb8, SrgbLut};
+use crate::simd::Isa;
+use zlib_rs::{Deflate, DeflateConfig, DeflateFlush, Strategy};
+
+/// The zlib header: CM = 8 (deflate), CINFO = 7 (32 KiB window), FLEVEL = 0 ("fastest"),
+/// FCHECK making the 16-bit value a multiple of 31 (RFC 1950 §2.2): `0x7801`, the header
+/// `png`'s fdeflate path writes.
+const ZLIB_HEADER: [u8; 2] = [0x78, 0x01];
+
+/// Raw bytes per band: about 256 KiB (45 rows of a 1920-pixel 8-bit RGB image, 24 bands
+/// at 1080p), enough bands to keep every core busy to the end, few enough that the
+/// compressors' restarts cost little (see `bands_cost_little_in_size`).
+const BAND_BYTES: usize = 1 << 18;
+
+/// How one band's rows are filtered (PNG 1.2 §6).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Filtering {
+    /// Each row with the filter whose output has the smallest sum of absolute values (as
+    /// signed bytes), of Up, Sub, Average and Paeth tried in that order (a later one kept
+    /// on a tie, the first with sum 0 at once): `png`'s `Filter::Adaptive`, the same bytes.
+    Adaptive,
+    /// Every row with `Up`: `png`'s choice for `Compression::Fastest`.
+    Up,
+}
+
+/// The filtering and deflate settings of a [`PngCompression`].
+#[derive(Clone, Copy, Debug)]
+struct Settings {
+    filtering: Filtering,
+    level: i32,
+    strategy: Strategy,
+}
+
+impl Settings {
+    fn of(compression: PngCompression) -> Settings {
+        match compression {
+            PngCompression::Fast => Settings {
+                filtering: Filtering::Adaptive,
+                level: 1,
+                strategy: Strategy::Default,
+            },
+            PngCompression::Fastest => Settings {
+                filtering: Filtering::Up,
+                level: 1,
+                strategy: Strategy::Default,
+            },
+            PngCompression::Rle => Settings {
+                filtering: Filtering::Up,
+                level: 1,
+                strategy: Strategy::Rle,
+            },
+        }
+    }
+}
+
+/// One band's output: its deflate segment (after the zlib header for the first band) and
+/// the Adler-32 of its filtered bytes.
+struct Segment {
+    bytes: Vec<u8>,
+    adler: u32,
+    filtered_len: u64,
+}
+
+/// The image data of `image` as a zlib stream in pieces, each to be written as one IDAT
+/// chunk in order: `bits` 8 or 16 (checked by the caller), RGB.
+pub(super) fn zlib_pieces(
+    image: &DisplayImage,
+    bits: u8,
+    compression: PngCompression,
+) -> Result<Vec<Vec<u8>>, String> {
+    let settings = Settings::of(compression);
+    let bpp = if bits == 8 { 3 } else { 6 };
+    let row_bytes = image.width * bpp;
+    let rows_per_band = (BAND_BYTES / row_bytes.max(1)).clamp(1, image.height.max(1));
+    let bands = image.height.div_ceil(rows_per_band).max(1);
+    let isa = Isa::detect();
+    let band = |k: usize| {
+        let rows = k * rows_per_band..((k + 1) * rows_per_band).min(image.height);
+        at_level!(
+            isa,
+            encode_band(image, bits, settings, rows.clone(), k == 0, k + 1 == bands)
+        )
+    };
+    #[cfg(feature = "rayon")]
+    let segments: Vec<Result<Segment, String>> = {
+        use rayon::prelude::*;
+        (0..bands).into_par_iter().map(band).collect()
+    };
+    #[cfg(not(feature = "rayon"))]
+    let segments: Vec<Result<Segment, String>> = (0..bands).map(band).collect();
+    let mut adler = 1u32;
+    let mut pieces = Vec::with_capacity(bands);
+    for segment in segments {
+        let segment = segment?;
+        adler = zlib_rs::adler32::adler32_combine(adler, segment.adler, segment.filtered_len);
+        pieces.push(segment.bytes);
+    }
+    if let Some(last) = pieces.last_mut() {
+        last.extend_from_slice(&adler.to_be_bytes());
+    }
+    Ok(pieces)
+}
+
+thread_local! {
+    /// Each thread's compressor, reset for each band (a new one allocates and clears
+    /// about 320 KiB at zlib's default memory level: window, hash chains, pending buffer),
+    /// with the level and strategy
+    /// it was made for.
+    static COMPRESSOR: std::cell::Cell<Option<(Deflate, (i32, Strategy))>> =
+        const { std::cell::Cell::new(None) };
+}
+
+/// Encode, filter and deflate `rows` of `image`.
+#[inline(always)]
+fn encode_band(
+    image: &DisplayImage,
+    bits: u8,
+    settings: Settings,
+    rows: std::ops::Range<usize>,
+    first: bool,
+    last: bool,
+) -> Result<Segment, String> {
+    let key = (settings.level, settings.strategy);
+    let mut deflate = match COMPRESSOR.take() {
+        Some((mut deflate, made_for)) if made_for == key => {
+            deflate.reset();
+            deflate
+        }
+        _ => Deflate::new_with_config(DeflateConfig {
+            level: settings.level,
+            // Negative: raw deflate, no zlib header or trailer (zlib's convention).
+            window_bits: -15,
+            strategy: settings.strategy,
+            ..DeflateConfig::default()
+        }),
+    };
+    let segment = deflate_rows(image, bits, settings, rows, first, last, &mut deflate);
+    if segment.is_ok() {
+        COMPRESSOR.set(Some((deflate, key)));
+    }
+    segment
+}
+
+/// [`encode_band`] with a compressor ready for a new stream.
+#[inline(always)]
+fn deflate_rows(
+    image: &DisplayImage,
+    bits: u8,
+    settings: Settings,
+    rows: std::ops::Range<usize>,
+    first: bool,
+    last: bool,
+    deflate: &mut Deflate,
+) -> Result<Segment, String> {
+    let bpp = if bits == 8 { 3 } else { 6 };
+    let row_bytes = image.width * bpp;
+    let raw_len = (row_bytes + 1) * rows.len();
+    let mut prev = vec![0u8; row_bytes];
+    let mut cur = vec![0u8; row_bytes];
+    // The filter type byte, then the filtered row; a second one for the adaptive trials.
+    let mut best = vec![0u8; row_bytes + 1];
+    let mut trial = vec![0u8; row_bytes + 1];
+    if rows.start > 0 {
+        encode_row(image, bits, rows.start - 1, &mut prev);
+    }
+    // A quarter of the raw size to start with: grown as needed (level 1 output of a
+    // mapped frame is 10-30 % of it), so little is zero-filled in advance.
+    let mut out = Output::new(raw_len / 4 + 64, first);
+    let mut adler = 1u32;
+    for y in rows.clone() {
+        encode_row(image, bits, y, &mut cur);
+        match settings.filtering {
+            Filtering::Up => {
+                best[0] = 2;
+                up(&prev, &cur, &mut best[1..]);
+            }
+            Filtering::Adaptive => adaptive(bpp, &prev, &cur, &mut best, &mut trial),
+        }
+        adler = zlib_rs::adler32::adler32(adler, &best);
+        out.deflate(deflate, &best, DeflateFlush::NoFlush)?;
+        std::mem::swap(&mut prev, &mut cur);
+    }
+    let flush = if last {
+        DeflateFlush::Finish
+    } else {
+        DeflateFlush::SyncFlush
+    };
+    out.deflate(deflate, &[], flush)?;
+    Ok(Segment {
+        bytes: out.into_bytes(),
+        adler,
+        filtered_len: raw_len as u64,
+    })
+}
+
+/// Row `y` of `image` as sRGB codes, interleaved RGB (`bits` 8 or 16, big-endian).
+#[inline(always)]
+fn encode_row(image: &DisplayImage, bits: u8, y: usize, out: &mut [u8]) {
+    let start = y * image.width;
+    let end = start + image.width;
+    let (r, g, b) = (
+        &image.r[start..end],
+        &image.g[start..end],
+        &image.b[start..end],
+    );
+    if bits == 8 {
+        srgb8_row(r, g, b, out);
+    } else {
+        srgb16_row(r, g, b, out);
+    }
+}
+
+/// A growing output buffer for a compressor (kept initialised: the crate has no `unsafe`
+/// outside its `simd` module).
+struct Output {
+    buf: Vec<u8>,
+    len: usize,
+}
+
+impl Output {
+    fn new(capacity: usize, zlib_header: bool) -> Output {
+        let mut buf = vec![0u8; capacity + 2];
+        let mut len = 0;
+        if zlib_header {
+            buf[..2].copy_from_slice(&ZLIB_HEADER);
+            len = 2;
+        }
+        Output { buf, len }
+    }
+
+    /// Compress all of `input` (and, with a flush, everything pending).
+    fn deflate(
+        &mut self,
+        deflate: &mut Deflate,
+        mut input: &[u8],
+        flush: DeflateFlush,
+    ) -> Result<(), String> {
+        loop {
+            if self.buf.len() - self.len < 64 {
+                let grow = self.buf.len().max(4096);
+                self.buf.resize(self.buf.len() + grow, 0);
+            }
+            let (before_in, before_out) = (deflate.total_in(), deflate.total_out());
+            let status = deflate
+                .compress(input, &mut self.buf[self.len..], flush)
+                .map_err(|e| format!("deflate: {}", e.as_str()))?;
+            let used = (deflate.total_in() - before_in) as usize;
+            let wrote = (deflate.total_out() - before_out) as usize;
+            input = &input[used..];
+            self.len += wrote;
+            let room_left = self.len < self.buf.len();
+            let done = match flush {
+                DeflateFlush::Finish => status == zlib_rs::Status::StreamEnd,
+                // All input taken and the output not full: nothing is pending.
+                _ => input.is_empty() && room_left,
+            };
+            if done {
+                return Ok(());
+            }
+        }
+    }
+
+    fn into_bytes(mut self) -> Vec<u8> {
+        self.buf.truncate(self.len);
+        self.buf
+    }
+}
+
+/// A row of 8-bit sRGB codes, interleaved RGB.
+#[inline(always)]
+fn srgb8_row(r: &[f32], g: &[f32], b: &[f32], out: &mut [u8]) {
+    Srgb8::get().encode_rgb(r, g, b, out);
+}
+
+/// A row of 16-bit sRGB codes, interleaved RGB, big-endian.
+#[inline(always)]
+fn srgb16_row(r: &[f32], g: &[f32], b: &[f32], out: &mut [u8]) {
+    srgb16_lut().encode_rgb(r, g, b, true, out);
+}
+
+/// The shared 16-bit table (see [`SrgbLut`]).
+pub(super) fn srgb16_lut() -> &'static SrgbLut {
+    static LUT: std::sync::OnceLock<SrgbLut> = std::sync::OnceLock::new();
+    LUT.get_or_init(|| SrgbLut::new(16))
+}
+
+/// The adaptive choice into `best` (type byte first); `trial` is scratch.
+#[inline(always)]
+fn adaptive(bpp: usize, prev: &[u8], cur: &[u8], best: &mut Vec<u8>, trial: &mut Vec<u8>) {
+    let mut min_cost = u64::MAX;
+    for kind in [2u8, 1, 3, 4] {
+        trial[0] = kind;
+        let out = &mut trial[1..];
+        match kind {
+            2 => up(prev, cur, out),
+            1 => sub(bpp, cur, out),
+            3 => avg(bpp, prev, cur, out),
+            _ => paeth(bpp, prev, cur, out),
+        }
+        let cost = sum_abs(&trial[1..]);
+        if cost <= min_cost {
+            min_cost = cost;
+            std::mem::swap(best, trial);
+            if cost == 0 {
+                return;
+            }
+        }
+    }
+}
+
+/// `Up`: each byte minus the byte above.
+#[inline(always)]
+fn up(prev: &[u8], cur: &[u8], out: &mut [u8]) {
+    for ((o, &c), &p) in out.iter_mut().zip(cur).zip(prev) {
+        *o = c.wrapping_sub(p);
+    }
+}
+
+/// `Sub`: each byte minus the byte one pixel to the left (0 left of the row).
+#[inline(always)]
+fn sub(bpp: usize, cur: &[u8], out: &mut [u8]) {
+    out[..bpp].copy_from_slice(&cur[..bpp]);
+    for ((o, &c), &a) in out[bpp..].iter_mut().zip(&cur[bpp..]).zip(cur) {
+        *o = c.wrapping_sub(a);
+    }
+}
+
+/// `Average`: each byte minus the floored mean of the bytes left and above.
+#[inline(always)]
+fn avg(bpp: usize, prev: &[u8], cur: &[u8], out: &mut [u8]) {
+    for ((o, &c), &b) in out[..bpp].iter_mut().zip(cur).zip(prev) {
+        *o = c.wrapping_sub(b / 2);
+    }
+    for (((o, &c), &a), &b) in out[bpp..]
+        .iter_mut()
+        .zip(&cur[bpp..])
+        .zip(cur)
+        .zip(&prev[bpp..])
+    {
+        *o = c.wrapping_sub(((u16::from(a) + u16::from(b)) >> 1) as u8);
+    }
+}
+
+/// `Paeth`: each byte minus the Paeth predictor of the bytes left (a), above (b) and
+/// above-left (c) (PNG 1.2 §6.6).
+#[inline(always)]
+fn paeth(bpp: usize, prev: &[u8], cur: &[u8], out: &mut [u8]) {
+    for ((o, &c), &b) in out[..bpp].iter_mut().zip(cur).zip(prev) {
+        *o = c.wrapping_sub(paeth_predictor(0, b, 0));
+    }
+    for ((((o, &x), &a), &b), &c) in out[bpp..]
+        .iter_mut()
+        .zip(&cur[bpp..])
+        .zip(cur)
+        .zip(&prev[bpp..])
+        .zip(prev)
+    {
+        *o = x.wrapping_sub(paeth_predictor(a, b, c));
+    }
+}
+
+/// The Paeth predictor, branch-free: the one of `a`, `b`, `c` nearest `a + b − c`, ties
+/// to `a`, then `b`.
+#[inline(always)]
+fn paeth_predictor(a: u8, b: u8, c: u8) -> u8 {
+    let (ia, ib, ic) = (i16::from(a), i16::from(b), i16::from(c));
+    let pa = (ib - ic).abs();
+    let pb = (ia - ic).abs();
+    let pc = (ia + ib - 2 * ic).abs();
+    let not_a = pb < pa || pc < pa;
+    let b_or_c = if pc < pb { c } else { b };
+    if not_a { b_or_c } else { a }
+}
+
+/// The sum of the bytes' absolute values as signed bytes (the adaptive filter's cost).
+#[inline(always)]
+fn sum_abs(bytes: &[u8]) -> u64 {
+    let mut sum = 0u64;
+    for chunk in bytes.chunks(4096) {
+        // At most 4096 × 128 per chunk: fits a u32.
+        let mut acc = 0u32;
+        for &b in chunk {
+            acc += u32::from((b as i8).unsigned_abs());
+        }
+        sum += u64::from(acc);
+    }
+    sum
+}
