@@ -942,6 +942,13 @@ thread_local! {
 /// never reallocate it, while a huge block of a damaged or unusual file is not held on to.
 const MAX_KEPT_BUFFER: usize = 4 << 20;
 
+/// Bytes of output buffer the inflater is given beyond the block's size. zune-inflate
+/// 0.2.54 grows (reallocates and copies) its output whenever it comes within
+/// `FASTLOOP_MAX_BYTES_WRITTEN` = 6 + 258 + 2·16 = 296 bytes of the end (`decoder.rs`,
+/// `constants.rs`), which an exact size would do at the end of every block; the slack
+/// avoids that. The limit (`set_limit`) stays the exact size.
+const INFLATE_SLACK: usize = 512;
+
 /// Decompress one ZIP or ZIPS block (OpenEXR `ImfZip.cpp`, `Zip::uncompress`) into `out`,
 /// resized to `expected_len`: the bytes as they stand when the block is stored
 /// uncompressed (its compressed form was no smaller, OpenEXR file layout), else the zlib
@@ -957,7 +964,7 @@ fn zip_block(data: &[u8], expected_len: usize, out: &mut Vec<u8>) -> Result<()> 
     }
     let options = zune_inflate::DeflateOptions::default()
         .set_limit(expected_len)
-        .set_size_hint(expected_len);
+        .set_size_hint(expected_len + INFLATE_SLACK);
     let inflated = zune_inflate::DeflateDecoder::new_with_options(data, options)
         .decode_zlib()
         .map_err(|_| invalid("ZIP-compressed block is malformed"))?;
@@ -985,14 +992,31 @@ fn reconstruct(src: &[u8], dst: &mut [u8]) {
     let sum = first.iter().fold(0u8, |s, &v| s.wrapping_add(v));
     let odd_count = ((first.len() - 1) & 1) as u8;
     let mut b = sum.wrapping_sub(odd_count.wrapping_mul(128));
-    // Starting the first sum at 128 makes t[0] = d[0].
-    let mut a = 128u8;
-    let pairs = dst.chunks_exact_mut(2);
-    for ((pair, &da), &db) in pairs.zip(first).zip(second) {
-        a = a.wrapping_add(da ^ 0x80);
-        b = b.wrapping_add(db ^ 0x80);
-        pair[0] = a;
-        pair[1] = b;
+    // Two steps at a time, so that the parity of i is fixed at each: the sums carry the
+    // plain bytes (one addition per byte on each dependency chain) and the −128·i of the
+    // predictor, 0 or 128 by the parity of i, is applied to the output only. Here `a` is
+    // Σ_{i≤k} d[i] = t[k] + 128·k and `b` is t[h+k] + 128·(k+1).
+    let mut a = 0u8;
+    let quads = dst.chunks_exact_mut(4);
+    for ((out, da), db) in quads.zip(first.chunks_exact(2)).zip(second.chunks_exact(2)) {
+        a = a.wrapping_add(da[0]);
+        b = b.wrapping_add(db[0]);
+        out[0] = a;
+        out[1] = b ^ 0x80;
+        a = a.wrapping_add(da[1]);
+        b = b.wrapping_add(db[1]);
+        out[2] = a ^ 0x80;
+        out[3] = b;
+    }
+    // After an even number of steps `b` is t itself, and `a` is t + 128 (t[−1] taken as
+    // 128 when there were none, so that t[0] = d[0]).
+    let mut a = a ^ 0x80;
+    let done = second.len() / 2 * 2;
+    if done < second.len() {
+        a = a.wrapping_add(first[done] ^ 0x80);
+        b = b.wrapping_add(second[done] ^ 0x80);
+        dst[2 * done] = a;
+        dst[2 * done + 1] = b;
     }
     if n % 2 == 1 {
         dst[n - 1] = a.wrapping_add(first[first.len() - 1] ^ 0x80);
