@@ -388,6 +388,7 @@ fn decode_checked(bytes: &[u8], limits: &Limits, spare: &mut Vec<Vec<f32>>) -> R
     let budget = Budget {
         limits,
         spare: limits.max_memory_bytes - planes_total.unwrap_or(0),
+        zip: zip_is_ours(header.compression),
     };
 
     let pending = collect_blocks(bytes, &meta, tables_start, index)?;
@@ -617,6 +618,10 @@ struct Budget<'a> {
     limits: &'a Limits,
     /// Bytes available for the blocks in flight (compressed copy and decompressed block).
     spare: u64,
+    /// Whether the blocks are decompressed by [`zip_block`] (an inflated block and a
+    /// reconstructed one in flight) rather than by the `exr` crate (a copy of the
+    /// compressed bytes and a decompressed block).
+    zip: bool,
 }
 
 impl Budget<'_> {
@@ -625,7 +630,14 @@ impl Budget<'_> {
     /// The `exr` crate allocates a decompressed block in full before reading its data, so
     /// this check is what keeps a hostile block size from aborting the process.
     fn batch<'b, 'c>(&self, blocks: &'b [PendingBlock<'c>]) -> Result<&'b [PendingBlock<'c>]> {
-        let cost = |b: &PendingBlock<'_>| b.expected_len as u64 + b.data.len() as u64;
+        let cost = |b: &PendingBlock<'_>| {
+            let first = if self.zip {
+                (b.expected_len + INFLATE_SLACK) as u64
+            } else {
+                b.data.len() as u64
+            };
+            b.expected_len as u64 + first
+        };
         let mut total = 0u64;
         let mut count = 0usize;
         for b in blocks.iter().take(BATCH) {
@@ -1228,7 +1240,13 @@ fn rgb_planes_to_xyz_parallel(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32]
 /// order, without fused multiply-adds, so the same results bit for bit, two to four times
 /// as many pixels per instruction as the baseline (SSE2) build.
 fn rgb_to_xyz(isa: Isa, m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
-    isa.run(|| rgb_to_xyz_kernel(m, scale, r, g, b));
+    // The closure is inlined into each level's target-feature function only when told
+    // to: called from the three levels' arms of `Isa::run`, it is otherwise compiled once,
+    // for the baseline (SSE2), and every level runs that.
+    isa.run(
+        #[inline(always)]
+        || rgb_to_xyz_kernel(m, scale, r, g, b),
+    );
 }
 
 /// The loop of [`rgb_to_xyz`], inlined into each instruction set's build.
@@ -2103,6 +2121,34 @@ mod tests {
                 "{name}"
             );
         }
+    }
+
+    #[test]
+    fn zip_blocks_in_flight_are_counted_in_the_budget() {
+        use exr::compression::Compression::ZIP16;
+        let rgb = [
+            ("B", SampleType::F16),
+            ("G", SampleType::F16),
+            ("R", SampleType::F16),
+        ];
+        let file = zip_file(64, 40, &rgb, ZIP16, None, 0);
+        // The budget of `decode_checked`: the file, three planes and three more; then one
+        // block of 64 × 16 pixels of 6 bytes, inflated (with the inflater's slack) and
+        // reconstructed.
+        let planes = (64 * 40 * 4 * 6 + file.len()) as u64;
+        let block = 64 * 16 * 6;
+        let needed = planes + (2 * block + INFLATE_SLACK) as u64;
+        let limits = |max_memory_bytes| Limits {
+            max_memory_bytes,
+            ..Limits::default()
+        };
+        let e = decode(&file, &limits(needed - 1)).unwrap_err();
+        assert!(matches!(e, Error::Limits(_)), "{e}");
+        let image = decode(&file, &limits(needed)).unwrap();
+        assert_eq!(
+            bits(&image),
+            bits(&decode(&file, &Limits::default()).unwrap())
+        );
     }
 
     #[test]
