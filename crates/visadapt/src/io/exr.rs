@@ -388,6 +388,7 @@ fn decode_checked(bytes: &[u8], limits: &Limits, spare: &mut Vec<Vec<f32>>) -> R
     let budget = Budget {
         limits,
         spare: limits.max_memory_bytes - planes_total.unwrap_or(0),
+        zip: zip_is_ours(header.compression),
     };
 
     let pending = collect_blocks(bytes, &meta, tables_start, index)?;
@@ -617,6 +618,10 @@ struct Budget<'a> {
     limits: &'a Limits,
     /// Bytes available for the blocks in flight (compressed copy and decompressed block).
     spare: u64,
+    /// Whether the blocks are decompressed by [`zip_block`] (an inflated block and a
+    /// reconstructed one in flight) rather than by the `exr` crate (a copy of the
+    /// compressed bytes and a decompressed block).
+    zip: bool,
 }
 
 impl Budget<'_> {
@@ -625,7 +630,14 @@ impl Budget<'_> {
     /// The `exr` crate allocates a decompressed block in full before reading its data, so
     /// this check is what keeps a hostile block size from aborting the process.
     fn batch<'b, 'c>(&self, blocks: &'b [PendingBlock<'c>]) -> Result<&'b [PendingBlock<'c>]> {
-        let cost = |b: &PendingBlock<'_>| b.expected_len as u64 + b.data.len() as u64;
+        let cost = |b: &PendingBlock<'_>| {
+            let first = if self.zip {
+                (b.expected_len + INFLATE_SLACK) as u64
+            } else {
+                b.data.len() as u64
+            };
+            b.expected_len as u64 + first
+        };
         let mut total = 0u64;
         let mut count = 0usize;
         for b in blocks.iter().take(BATCH) {
@@ -754,22 +766,28 @@ fn decompress_and_scatter(
             header
         }
     };
+    let ours = zip_is_ours(header.compression);
     let decompress = |block: &PendingBlock<'_>| -> Result<Vec<u8>> {
-        let data = foreign(|| {
-            header
-                .compression
-                .decompress_image_section_from_le(
-                    header_for(block),
-                    block.data.to_vec(),
-                    block.rect,
-                    false,
-                )
-                .map_err(exr_error)
-        })?;
-        if data.len() != block.expected_len {
-            return Err(invalid("decompressed block has the wrong size"));
+        if ours {
+            let mut out = Vec::new();
+            zip_block(block.data, block.expected_len, &mut out)?;
+            return Ok(out);
         }
-        Ok(data)
+        exr_block(header_for(block), block)
+    };
+    // A block's bytes handed to `f`: ZIP/ZIPS blocks decompressed into this thread's reused
+    // buffer, the others through `decompress`.
+    let with_block = |block: &PendingBlock<'_>, f: &mut dyn FnMut(&[u8]) -> Result<()>| {
+        if ours {
+            let mut out = ZIP_BUFFER.with(std::cell::Cell::take);
+            let result = zip_block(block.data, block.expected_len, &mut out).and_then(|()| f(&out));
+            if out.capacity() <= MAX_KEPT_BUFFER {
+                ZIP_BUFFER.with(|b| b.set(out));
+            }
+            result
+        } else {
+            f(&decompress(block)?)
+        }
     };
     // Every sample of every plane is written: the blocks, checked in `collect_blocks`,
     // cover the data window exactly. So a reused plane is only resized, not cleared.
@@ -890,8 +908,7 @@ fn decompress_and_scatter(
         let (batch_slots, rest_slots) = std::mem::take(&mut slots).split_at_mut(count);
         let mut work: Vec<_> = batch.iter().zip(batch_slots.iter_mut()).collect();
         let results = map_items_mut(&mut work, |(block, (dst, origin))| -> Result<()> {
-            let data = decompress(block)?;
-            fill(block, &data, dst, origin)
+            with_block(block, &mut |data| fill(block, data, dst, origin))
         });
         results.into_iter().collect::<Result<()>>()?;
         (blocks, slots) = (rest, rest_slots);
@@ -901,6 +918,121 @@ fn decompress_and_scatter(
         planes,
         xyz: matrix.is_some(),
     })
+}
+
+/// Decompress one block with the `exr` crate (`header` with the true bytes per pixel of
+/// the block, see `decompress_and_scatter`).
+fn exr_block(header: &Header, block: &PendingBlock<'_>) -> Result<Vec<u8>> {
+    let data = foreign(|| {
+        header
+            .compression
+            .decompress_image_section_from_le(header, block.data.to_vec(), block.rect, false)
+            .map_err(exr_error)
+    })?;
+    if data.len() != block.expected_len {
+        return Err(invalid("decompressed block has the wrong size"));
+    }
+    Ok(data)
+}
+
+/// Whether blocks of `compression` are decompressed by [`zip_block`] rather than by the
+/// `exr` crate: ZIP (16 lines) and ZIPS (one line), on little-endian machines (the file's
+/// byte order, so the reconstructed bytes are the native samples as they stand).
+fn zip_is_ours(compression: exr::compression::Compression) -> bool {
+    use exr::compression::Compression::{ZIP1, ZIP16};
+    cfg!(target_endian = "little") && matches!(compression, ZIP1 | ZIP16)
+}
+
+thread_local! {
+    /// This thread's buffer for the reconstructed bytes of ZIP blocks (see
+    /// [`zip_block`]), reused from block to block and from frame to frame.
+    static ZIP_BUFFER: std::cell::Cell<Vec<u8>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
+/// Largest buffer [`ZIP_BUFFER`] keeps between blocks, bytes. Our choice: well above a
+/// 4K ZIP block (3840 × 16 lines × 4 half channels = 480 KiB), so the frames of a video
+/// never reallocate it, while a huge block of a damaged or unusual file is not held on to.
+const MAX_KEPT_BUFFER: usize = 4 << 20;
+
+/// Bytes of output buffer the inflater is given beyond the block's size. zune-inflate
+/// 0.2.54 grows (reallocates and copies) its output whenever it comes within
+/// `FASTLOOP_MAX_BYTES_WRITTEN` = 6 + 258 + 2·16 = 296 bytes of the end (`decoder.rs`,
+/// `constants.rs`), which an exact size would do at the end of every block; the slack
+/// avoids that. The limit (`set_limit`) stays the exact size.
+const INFLATE_SLACK: usize = 512;
+
+/// Decompress one ZIP or ZIPS block (OpenEXR `ImfZip.cpp`, `Zip::uncompress`) into `out`,
+/// resized to `expected_len`: the bytes as they stand when the block is stored
+/// uncompressed (its compressed form was no smaller, OpenEXR file layout), else the zlib
+/// stream inflated (the Adler-32 checksum checked; a stream of any other length than
+/// `expected_len` is an error), then [`reconstruct`]. The same bytes as the `exr` crate's
+/// `zip::decompress_bytes`, without its copies and allocations.
+fn zip_block(data: &[u8], expected_len: usize, out: &mut Vec<u8>) -> Result<()> {
+    // Grown, never cleared: every byte is overwritten below.
+    out.resize(expected_len, 0);
+    if data.len() == expected_len {
+        out.copy_from_slice(data);
+        return Ok(());
+    }
+    let options = zune_inflate::DeflateOptions::default()
+        .set_limit(expected_len)
+        .set_size_hint(expected_len + INFLATE_SLACK);
+    let inflated = zune_inflate::DeflateDecoder::new_with_options(data, options)
+        .decode_zlib()
+        .map_err(|_| invalid("ZIP-compressed block is malformed"))?;
+    if inflated.len() != expected_len {
+        return Err(invalid("decompressed block has the wrong size"));
+    }
+    reconstruct(&inflated, out);
+    Ok(())
+}
+
+/// Undo OpenEXR's ZIP preprocessing (`ImfZip.cpp`, `Zip::uncompress`): the predictor
+/// (`t[0] = d[0]`, `t[i] = t[i−1] + d[i] − 128`, wrapping bytes) and the split of the
+/// bytes into two halves (`out[2k] = t[k]`, `out[2k+1] = t[h+k]`, `h = ⌈n/2⌉`), in one
+/// pass: two running sums, one through each half, the second started from the sum over
+/// the whole first half (a separate pass that vectorises). `src` and `dst` have the same
+/// length.
+fn reconstruct(src: &[u8], dst: &mut [u8]) {
+    let n = src.len();
+    debug_assert_eq!(dst.len(), n);
+    if n == 0 {
+        return;
+    }
+    let (first, second) = src.split_at(n.div_ceil(2));
+    // t[h−1] = d[0] + Σ_{i=1}^{h−1} (d[i] − 128): the byte sum minus (h − 1)·128.
+    let sum = first.iter().fold(0u8, |s, &v| s.wrapping_add(v));
+    let odd_count = ((first.len() - 1) & 1) as u8;
+    let mut b = sum.wrapping_sub(odd_count.wrapping_mul(128));
+    // Two steps at a time, so that the parity of i is fixed at each: the sums carry the
+    // plain bytes (one addition per byte on each dependency chain) and the −128·i of the
+    // predictor, 0 or 128 by the parity of i, is applied to the output only. Here `a` is
+    // Σ_{i≤k} d[i] = t[k] + 128·k and `b` is t[h+k] + 128·(k+1).
+    let mut a = 0u8;
+    let quads = dst.chunks_exact_mut(4);
+    for ((out, da), db) in quads.zip(first.chunks_exact(2)).zip(second.chunks_exact(2)) {
+        a = a.wrapping_add(da[0]);
+        b = b.wrapping_add(db[0]);
+        out[0] = a;
+        out[1] = b ^ 0x80;
+        a = a.wrapping_add(da[1]);
+        b = b.wrapping_add(db[1]);
+        out[2] = a ^ 0x80;
+        out[3] = b;
+    }
+    // After an even number of steps `b` is t itself, and `a` is t + 128 (t[−1] taken as
+    // 128 when there were none, so that t[0] = d[0]).
+    let mut a = a ^ 0x80;
+    let done = second.len() / 2 * 2;
+    if done < second.len() {
+        a = a.wrapping_add(first[done] ^ 0x80);
+        b = b.wrapping_add(second[done] ^ 0x80);
+        dst[2 * done] = a;
+        dst[2 * done + 1] = b;
+    }
+    if n % 2 == 1 {
+        dst[n - 1] = a.wrapping_add(first[first.len() - 1] ^ 0x80);
+    }
 }
 
 /// Convert one line of `count` samples of type `ty` (native endian) into `dst`.
@@ -1108,7 +1240,13 @@ fn rgb_planes_to_xyz_parallel(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32]
 /// order, without fused multiply-adds, so the same results bit for bit, two to four times
 /// as many pixels per instruction as the baseline (SSE2) build.
 fn rgb_to_xyz(isa: Isa, m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
-    isa.run(|| rgb_to_xyz_kernel(m, scale, r, g, b));
+    // The closure is inlined into each level's target-feature function only when told
+    // to: called from the three levels' arms of `Isa::run`, it is otherwise compiled once,
+    // for the baseline (SSE2), and every level runs that.
+    isa.run(
+        #[inline(always)]
+        || rgb_to_xyz_kernel(m, scale, r, g, b),
+    );
 }
 
 /// The loop of [`rgb_to_xyz`], inlined into each instruction set's build.
@@ -1725,5 +1863,404 @@ mod tests {
         assert!(decode_into(&broken, &limits, &mut image).is_err());
         decode_into(&files[1], &limits, &mut image).unwrap();
         assert_eq!(bits(&image), bits(&decode(&files[1], &limits).unwrap()));
+    }
+
+    /// The ZIP blocks of `file`'s first usable part: the part's header and its blocks;
+    /// `None` when the file is not read that far or is not ZIP-compressed.
+    fn zip_part(file: &[u8]) -> Option<(MetaData, usize, usize)> {
+        let mut cursor = Cursor::new(file);
+        let meta =
+            foreign(|| MetaData::read_from_buffered(&mut cursor, false).map_err(exr_error)).ok()?;
+        let index = meta.headers.iter().position(|h| !h.deep)?;
+        zip_is_ours(meta.headers[index].compression).then_some((
+            meta,
+            cursor.position() as usize,
+            index,
+        ))
+    }
+
+    /// Decompress every block of `file` with [`zip_block`] and with the `exr` crate and
+    /// check that both agree (the same bytes, or both an error), also on `mutations` damaged
+    /// copies of each block; returns the number of
+    /// blocks decompressed, or `None` when the file has no ZIP part whose blocks collect.
+    fn compare_zip_blocks(name: &str, file: &[u8], mutations: usize) -> Option<usize> {
+        let (meta, tables, index) = zip_part(file)?;
+        let header = &meta.headers[index];
+        let blocks = collect_blocks(file, &meta, tables, index).ok()?;
+        let subsampled = header
+            .channels
+            .list
+            .iter()
+            .any(|c| c.sampling != Vec2(1, 1));
+        let mut ok = 0;
+        let mut buffer = vec![0xAB; 7];
+        for (k, block) in blocks.iter().enumerate() {
+            let ours = zip_block(block.data, block.expected_len, &mut buffer);
+            if subsampled {
+                // The exr crate needs a patched header for these; ours must still not
+                // panic and give the expected length.
+                assert!(ours.is_err() || buffer.len() == block.expected_len);
+                continue;
+            }
+            ok += usize::from(same_as_exr(name, k, header, block, ours, &buffer));
+            // Damaged copies of the block: a flipped byte here and there, a cut stream.
+            for m in 0..mutations {
+                let mut data = block.data.to_vec();
+                let at = (m * 7919 + k * 31) % data.len().max(1);
+                match m % 3 {
+                    0 if !data.is_empty() => data[at] ^= 1 << (m % 8),
+                    1 => data.truncate(at),
+                    _ => data.push(m as u8),
+                }
+                let damaged = PendingBlock {
+                    data: &data,
+                    ..*block
+                };
+                let ours = zip_block(damaged.data, damaged.expected_len, &mut buffer);
+                same_as_exr(name, k, header, &damaged, ours, &buffer);
+            }
+        }
+        Some(ok)
+    }
+
+    /// Check our result for one block against the `exr` crate's: the same bytes, or both
+    /// an error. Whether the block decoded.
+    fn same_as_exr(
+        name: &str,
+        k: usize,
+        header: &Header,
+        block: &PendingBlock<'_>,
+        ours: Result<()>,
+        buffer: &[u8],
+    ) -> bool {
+        match (ours, exr_block(header, block)) {
+            (Ok(()), Ok(t)) => {
+                assert!(buffer == t, "{name}: block {k} differs");
+                true
+            }
+            (Err(e), Err(_)) => {
+                assert!(!e.to_string().contains('\n'));
+                false
+            }
+            (o, t) => panic!(
+                "{name}: block {k}: ours {o:?}, exr {:?}",
+                t.map(|v| v.len())
+            ),
+        }
+    }
+
+    /// A file of `channels` (name, sample type) with `w × h` pixels of smooth values
+    /// plus noise (`noise` = 0: none; large: incompressible blocks, stored uncompressed).
+    fn zip_file(
+        w: usize,
+        h: usize,
+        channels: &[(&str, SampleType)],
+        compression: exr::compression::Compression,
+        tiles: Option<(usize, usize)>,
+        noise: u32,
+    ) -> Vec<u8> {
+        use exr::prelude::*;
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut rnd = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let list: Vec<AnyChannel<FlatSamples>> = channels
+            .iter()
+            .enumerate()
+            .map(|(c, &(name, ty))| {
+                let mut value = |i: usize| {
+                    let smooth = ((i % w) as f32 * 0.3 + (i / w) as f32 * 0.7 + c as f32).sin();
+                    let jitter = if noise == 0 {
+                        0.0
+                    } else {
+                        (rnd() % u64::from(noise)) as f32
+                    };
+                    smooth.abs() * 200.0 + jitter
+                };
+                let samples = match ty {
+                    SampleType::F16 => {
+                        FlatSamples::F16((0..w * h).map(|i| f16::from_f32(value(i))).collect())
+                    }
+                    SampleType::F32 => FlatSamples::F32((0..w * h).map(value).collect()),
+                    SampleType::U32 => {
+                        FlatSamples::U32((0..w * h).map(|i| value(i) as u32).collect())
+                    }
+                };
+                AnyChannel::new(name, samples)
+            })
+            .collect();
+        let layer = Layer::new(
+            (w, h),
+            LayerAttributes::default(),
+            Encoding {
+                compression,
+                blocks: match tiles {
+                    Some((tw, th)) => Blocks::Tiles(Vec2(tw, th)),
+                    None => Blocks::ScanLines,
+                },
+                line_order: LineOrder::Increasing,
+            },
+            AnyChannels::sort(SmallVec::from_vec(list)),
+        );
+        let mut out = Cursor::new(Vec::new());
+        Image::from_layer(layer)
+            .write()
+            .to_buffered(&mut out)
+            .unwrap();
+        out.into_inner()
+    }
+
+    #[test]
+    fn reconstruct_matches_the_definition() {
+        // OpenEXR ImfZip.cpp: predictor over the whole buffer, then interleave the halves.
+        let reference = |d: &[u8]| -> Vec<u8> {
+            let mut t = d.to_vec();
+            for i in 1..t.len() {
+                t[i] = t[i - 1].wrapping_add(t[i]).wrapping_sub(128);
+            }
+            let h = t.len().div_ceil(2);
+            (0..t.len())
+                .map(|i| if i % 2 == 0 { t[i / 2] } else { t[h + i / 2] })
+                .collect()
+        };
+        let mut state = 88172645463325252u64;
+        for n in (0..70).chain([255, 256, 257, 4097, 184_320]) {
+            let d: Vec<u8> = (0..n)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    state as u8
+                })
+                .collect();
+            let mut out = vec![0u8; n];
+            reconstruct(&d, &mut out);
+            assert_eq!(out, reference(&d), "n = {n}");
+        }
+    }
+
+    #[test]
+    fn zip_blocks_match_the_exr_crate() {
+        use SampleType::{F16, F32, U32};
+        use exr::compression::Compression::{ZIP1, ZIP16};
+        let layouts: [&[(&str, SampleType)]; 5] = [
+            &[("B", F16), ("G", F16), ("R", F16)],
+            &[("Y", F32)],
+            &[("Y", U32)],
+            &[("B", F16), ("G", F32), ("R", F16), ("Z", U32)],
+            &[("Y", F16)],
+        ];
+        let mut blocks = 0;
+        for compression in [ZIP1, ZIP16] {
+            for channels in layouts {
+                // Odd sizes, a last block of fewer lines than the block height, a single
+                // pixel, tiles cut at the edges.
+                for (w, h) in [(1, 1), (17, 23), (64, 40), (3, 35)] {
+                    for tiles in [None, Some((16, 16)), Some((5, 7))] {
+                        for noise in [0, 1 << 20] {
+                            let file = zip_file(w, h, channels, compression, tiles, noise);
+                            let name =
+                                format!("{compression:?} {channels:?} {w}x{h} {tiles:?} {noise}");
+                            let n = compare_zip_blocks(&name, &file, 6).expect("ZIP part");
+                            assert!(n > 0, "{name}");
+                            blocks += n;
+                            // The whole image as well: the same planes as the exr crate's
+                            // own reader gives.
+                            compare_with_exr_reader(&name, &file);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(blocks > 1000, "{blocks}");
+    }
+
+    /// Decode `file` and check its planes against the `exr` crate's own reader (the
+    /// channels Y, or R, G, B converted with the Rec. 709 matrix as [`to_hdr`] does).
+    fn compare_with_exr_reader(name: &str, file: &[u8]) {
+        use exr::prelude::*;
+        let ours = decode(file, &Limits::default()).unwrap();
+        let image = exr::prelude::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(Cursor::new(file))
+            .unwrap();
+        let plane = |n: &str| -> Option<Vec<f32>> {
+            let c = image
+                .layer_data
+                .channel_data
+                .list
+                .iter()
+                .find(|c| c.name.eq(n))?;
+            Some(c.sample_data.values_as_f32().collect())
+        };
+        let m = REC709.rgb_to_xyz().unwrap();
+        if let (Some(mut r), Some(mut g), Some(mut b)) = (plane("R"), plane("G"), plane("B")) {
+            colour::rgb_planes_to_xyz(&m, 1.0, &mut r, &mut g, &mut b);
+            for (got, want) in [(&ours.x, &r), (&ours.y, &g), (&ours.z, &b)] {
+                assert!(
+                    got.iter()
+                        .zip(want)
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{name}"
+                );
+            }
+        } else {
+            let y = plane("Y").unwrap();
+            assert!(
+                ours.y
+                    .iter()
+                    .zip(&y)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{name}"
+            );
+        }
+    }
+
+    #[test]
+    fn zip_blocks_in_flight_are_counted_in_the_budget() {
+        use exr::compression::Compression::ZIP16;
+        let rgb = [
+            ("B", SampleType::F16),
+            ("G", SampleType::F16),
+            ("R", SampleType::F16),
+        ];
+        let file = zip_file(64, 40, &rgb, ZIP16, None, 0);
+        // The budget of `decode_checked`: the file, three planes and three more; then one
+        // block of 64 × 16 pixels of 6 bytes, inflated (with the inflater's slack) and
+        // reconstructed.
+        let planes = (64 * 40 * 4 * 6 + file.len()) as u64;
+        let block = 64 * 16 * 6;
+        let needed = planes + (2 * block + INFLATE_SLACK) as u64;
+        let limits = |max_memory_bytes| Limits {
+            max_memory_bytes,
+            ..Limits::default()
+        };
+        let e = decode(&file, &limits(needed - 1)).unwrap_err();
+        assert!(matches!(e, Error::Limits(_)), "{e}");
+        let image = decode(&file, &limits(needed)).unwrap();
+        assert_eq!(
+            bits(&image),
+            bits(&decode(&file, &Limits::default()).unwrap())
+        );
+    }
+
+    #[test]
+    fn zip_block_of_the_wrong_length_is_an_error() {
+        // A zlib stream of one stored deflate block (RFC 1950/1951) holding `payload`.
+        let zlib = |payload: &[u8]| -> Vec<u8> {
+            let len = payload.len() as u16;
+            let mut z = vec![0x78, 0x01, 0x01];
+            z.extend(len.to_le_bytes());
+            z.extend((!len).to_le_bytes());
+            z.extend(payload);
+            let (mut a, mut b) = (1u32, 0u32);
+            for &v in payload {
+                a = (a + u32::from(v)) % 65521;
+                b = (b + a) % 65521;
+            }
+            z.extend(((b << 16) | a).to_be_bytes());
+            z
+        };
+        let payload: Vec<u8> = (0..100u8).collect();
+        let mut out = Vec::new();
+        // The right length decodes (to the reconstructed bytes).
+        zip_block(&zlib(&payload), 100, &mut out).unwrap();
+        let mut want = vec![0; 100];
+        reconstruct(&payload, &mut want);
+        assert_eq!(out, want);
+        // One byte short, one byte too many, a damaged checksum, a cut stream.
+        for (stream, expected) in [
+            (zlib(&payload[..99]), 100),
+            (zlib(&payload), 99),
+            (zlib(&payload), 101),
+        ] {
+            let e = zip_block(&stream, expected, &mut out).unwrap_err();
+            assert!(matches!(e, Error::Decode { .. }), "{e}");
+        }
+        let mut bad = zlib(&payload);
+        *bad.last_mut().unwrap() ^= 1;
+        assert!(zip_block(&bad, 100, &mut out).is_err());
+        let cut = &zlib(&payload)[..50];
+        assert!(zip_block(cut, 100, &mut out).is_err());
+    }
+
+    /// A directory of the shared data set, as the integration tests find it
+    /// (`tests/common/mod.rs`): `$VISADAPT_SHARED_DATA` or `../shared/data` beside the
+    /// repository; `None` (skip) when absent, a failure when
+    /// `VISADAPT_REQUIRE_SHARED_DATA=1`.
+    fn shared_dir(rel: &str) -> Option<std::fs::ReadDir> {
+        let root = std::env::var_os("VISADAPT_SHARED_DATA")
+            .map(std::path::PathBuf::from)
+            .unwrap_or_else(|| {
+                std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data")
+            });
+        match std::fs::read_dir(root.join(rel)) {
+            Ok(dir) => Some(dir),
+            Err(_)
+                if std::env::var_os("VISADAPT_REQUIRE_SHARED_DATA").is_some_and(|v| v == "1") =>
+            {
+                panic!("shared test data {rel} is missing")
+            }
+            Err(_) => {
+                eprintln!("note: shared test data {rel} not found, skipping");
+                None
+            }
+        }
+    }
+
+    #[test]
+    fn shared_files_recompressed_with_zip_match_the_exr_crate() {
+        use exr::prelude::*;
+        let Some(dir) = shared_dir("openexr") else {
+            return;
+        };
+        let mut files: Vec<_> = dir
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "exr"))
+            .collect();
+        files.sort();
+        let mut tried = 0;
+        for path in files {
+            let bytes = std::fs::read(&path).unwrap();
+            // The exr crate refuses subsampled files (StarField.exr).
+            let Ok(mut image) = exr::prelude::read()
+                .no_deep_data()
+                .largest_resolution_level()
+                .all_channels()
+                .all_layers()
+                .all_attributes()
+                .from_buffered(Cursor::new(&bytes[..]))
+            else {
+                continue;
+            };
+            for compression in [Compression::ZIP1, Compression::ZIP16] {
+                for layer in image.layer_data.iter_mut() {
+                    layer.encoding.compression = compression;
+                }
+                let mut out = Cursor::new(Vec::new());
+                image.write().to_buffered(&mut out).unwrap();
+                let file = out.into_inner();
+                let name = format!("{} {compression:?}", path.display());
+                assert!(compare_zip_blocks(&name, &file, 0).unwrap() > 0, "{name}");
+                // And the whole decode is the same as of the original file.
+                let (a, b) = (
+                    decode(&file, &Limits::default()),
+                    decode(&bytes, &Limits::default()),
+                );
+                match (a, b) {
+                    (Ok(a), Ok(b)) => assert_eq!(bits(&a), bits(&b), "{name}"),
+                    (a, b) => assert_eq!(a.is_ok(), b.is_ok(), "{name}"),
+                }
+                tried += 1;
+            }
+        }
+        assert!(tried >= 14, "{tried}");
     }
 }
