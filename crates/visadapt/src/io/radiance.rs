@@ -2063,7 +2063,7 @@ mod tests {
         let mut rand = lcg(5);
         let mut errors = 0;
         for _ in 0..3000 {
-            let mut f = if rand() % 2 == 0 {
+            let mut f = if rand().is_multiple_of(2) {
                 rle_file.clone()
             } else {
                 mixed.clone()
