@@ -45,13 +45,17 @@
 //! Safety against damaged files: the header is read first, the data window is checked
 //! against [`Limits`] and the channel count against [`MAX_CHANNELS`] before any pixel
 //! memory is allocated; the planes, and every decompressed block in flight, are checked
-//! against the memory budget ([`Limits::max_memory_bytes`]) before they are allocated
-//! (the `exr` crate allocates a whole decompressed block before reading its data, and a
-//! failed allocation aborts the process); chunk offsets and sizes are checked against the
-//! file length. Each call into the `exr` crate runs under `catch_unwind`, so a panic
-//! inside it becomes [`Error::Decode`], and prints nothing (the process's panic hook is
-//! wrapped once to stay silent for those panics only); this module's own code is not
-//! guarded, so a bug in it is not mistaken for a corrupt file.
+//! against the memory budget ([`Limits::max_memory_bytes`]) before they are allocated (the
+//! `exr` crate allocates a whole decompressed block before reading its data, and a failed
+//! allocation aborts the process); chunk offsets and sizes are checked against the file
+//! length. ZIP and ZIPS blocks are decompressed here (zune-inflate, the inflater the `exr`
+//! crate uses, into a reused buffer, then OpenEXR's predictor and byte interleaving undone
+//! in one pass), the same bytes as the `exr` crate gives, checked by the tests against it;
+//! the other compressions through the `exr` crate. Each call into the `exr` crate or the
+//! inflater runs under `catch_unwind`, so a panic inside it becomes [`Error::Decode`], and
+//! prints nothing (the process's panic hook is wrapped once to stay silent for those panics
+//! only); this module's own code is not guarded, so a bug in it is not mistaken for a
+//! corrupt file.
 //!
 //! # Writing
 //!
@@ -977,9 +981,12 @@ fn zip_block(data: &[u8], expected_len: usize, out: &mut Vec<u8>) -> Result<()> 
     let options = zune_inflate::DeflateOptions::default()
         .set_limit(expected_len)
         .set_size_hint(expected_len + INFLATE_SLACK);
-    let inflated = zune_inflate::DeflateDecoder::new_with_options(data, options)
-        .decode_zlib()
-        .map_err(|_| invalid("ZIP-compressed block is malformed"))?;
+    // The inflater is foreign code on file data: guarded as the exr crate is.
+    let inflated = foreign(|| {
+        zune_inflate::DeflateDecoder::new_with_options(data, options)
+            .decode_zlib()
+            .map_err(|_| invalid("ZIP-compressed block is malformed"))
+    })?;
     if inflated.len() != expected_len {
         return Err(invalid("decompressed block has the wrong size"));
     }
@@ -1240,13 +1247,7 @@ fn rgb_planes_to_xyz_parallel(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32]
 /// order, without fused multiply-adds, so the same results bit for bit, two to four times
 /// as many pixels per instruction as the baseline (SSE2) build.
 fn rgb_to_xyz(isa: Isa, m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
-    // The closure is inlined into each level's target-feature function only when told
-    // to: called from the three levels' arms of `Isa::run`, it is otherwise compiled once,
-    // for the baseline (SSE2), and every level runs that.
-    isa.run(
-        #[inline(always)]
-        || rgb_to_xyz_kernel(m, scale, r, g, b),
-    );
+    isa.run(|| rgb_to_xyz_kernel(m, scale, r, g, b));
 }
 
 /// The loop of [`rgb_to_xyz`], inlined into each instruction set's build.
