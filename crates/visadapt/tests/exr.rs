@@ -1057,10 +1057,12 @@ fn rgb_half_blocks_match_the_exr_crate_and_serial_conversion_bit_for_bit() {
             for (got, expected, name) in
                 [(&img.x, &er, "X"), (&img.y, &eg, "Y"), (&img.z, &eb, "Z")]
             {
+                // Bit for bit, except that any NaN matches any NaN: the vectorised
+                // conversion may propagate the other operand's NaN payload (IEEE 754
+                // leaves the choice open).
                 for (i, (a, e)) in got.iter().zip(expected).enumerate() {
-                    assert_eq!(
-                        a.to_bits(),
-                        e.to_bits(),
+                    assert!(
+                        a.to_bits() == e.to_bits() || (a.is_nan() && e.is_nan()),
                         "{compression:?} {blocks:?} {line_order:?} {name} pixel {i}: {a} vs {e}"
                     );
                 }
