@@ -3,7 +3,7 @@
 //! second: one element a pixel). The ids are fixed so that figures can be followed over
 //! time:
 //!
-//! * `encode/png/1920x1080/{fast,fastest}`: [`write_png_with`] at 8 bits per channel,
+//! * `encode/png/1920x1080/{fast,fastest,rle}`: [`write_png_with`] at 8 bits per channel,
 //!   into a reused buffer (sRGB encoding, filtering and deflate in parallel row bands);
 //! * `encode/srgb8/1920x1080`: the sRGB transfer alone ([`to_srgb8`], interleaved 8-bit
 //!   codes), for the share of the transfer in the above.
@@ -63,6 +63,7 @@ fn bench(c: &mut Criterion) {
     for (name, compression) in [
         ("fast", PngCompression::Fast),
         ("fastest", PngCompression::Fastest),
+        ("rle", PngCompression::Rle),
     ] {
         bytes.clear();
         write_png_with(&image, 8, compression, &mut bytes).unwrap();
