@@ -965,22 +965,39 @@ const MAX_KEPT_BUFFER: usize = 4 << 20;
 /// avoids that. The limit (`set_limit`) stays the exact size.
 const INFLATE_SLACK: usize = 512;
 
+/// Largest ratio of inflated to compressed bytes a deflate stream can reach: 1032:1, a
+/// 258-byte match (RFC 1951 §3.2.5, the longest length) per two bits of codes (zlib's
+/// "Technical Details", Mark Adler: "the limit is 1032:1").
+const DEFLATE_MAX_RATIO: usize = 1032;
+
+/// The output size zune-inflate allocates up front for a block of `compressed_len`
+/// bytes that should inflate to `expected_len`: the expected size plus
+/// [`INFLATE_SLACK`], but never more than the stream could hold, so that a damaged
+/// header claiming a huge block does not reserve its memory.
+fn inflate_hint(compressed_len: usize, expected_len: usize) -> usize {
+    expected_len
+        .min(compressed_len.saturating_mul(DEFLATE_MAX_RATIO))
+        .saturating_add(INFLATE_SLACK)
+}
+
 /// Decompress one ZIP or ZIPS block (OpenEXR `ImfZip.cpp`, `Zip::uncompress`) into `out`,
 /// resized to `expected_len`: the bytes as they stand when the block is stored
 /// uncompressed (its compressed form was no smaller, OpenEXR file layout), else the zlib
 /// stream inflated (the Adler-32 checksum checked; a stream of any other length than
 /// `expected_len` is an error), then [`reconstruct`]. The same bytes as the `exr` crate's
 /// `zip::decompress_bytes`, without its copies and allocations.
+///
+/// `out` is grown only once the block has inflated to its full size, so a damaged header
+/// that claims a huge block over a few bytes of data costs no more than those bytes.
 fn zip_block(data: &[u8], expected_len: usize, out: &mut Vec<u8>) -> Result<()> {
-    // Grown, never cleared: every byte is overwritten below.
-    out.resize(expected_len, 0);
     if data.len() == expected_len {
-        out.copy_from_slice(data);
+        out.clear();
+        out.extend_from_slice(data);
         return Ok(());
     }
     let options = zune_inflate::DeflateOptions::default()
         .set_limit(expected_len)
-        .set_size_hint(expected_len + INFLATE_SLACK);
+        .set_size_hint(inflate_hint(data.len(), expected_len));
     // The inflater is foreign code on file data: guarded as the exr crate is.
     let inflated = foreign(|| {
         zune_inflate::DeflateDecoder::new_with_options(data, options)
@@ -990,6 +1007,8 @@ fn zip_block(data: &[u8], expected_len: usize, out: &mut Vec<u8>) -> Result<()> 
     if inflated.len() != expected_len {
         return Err(invalid("decompressed block has the wrong size"));
     }
+    // Grown, never cleared: every byte is overwritten by `reconstruct`.
+    out.resize(expected_len, 0);
     reconstruct(&inflated, out);
     Ok(())
 }
@@ -2198,6 +2217,20 @@ mod tests {
         assert!(zip_block(&bad, 100, &mut out).is_err());
         let cut = &zlib(&payload)[..50];
         assert!(zip_block(cut, 100, &mut out).is_err());
+    }
+
+    #[test]
+    fn a_damaged_block_claiming_a_huge_size_reserves_nothing() {
+        // A mutated data window (`tests/damaged.rs`, ZIP16 mutation 41) made a 2 KB file
+        // claim 1 GB blocks; the buffer was grown and zero-filled before the stream was
+        // found to be malformed, which took seconds.
+        let mut out = Vec::new();
+        let garbage = [0x78, 0x9c, 0x5d, 0xd3, 0x77, 0x34, 0x1b, 0x8a];
+        assert!(zip_block(&garbage, 1 << 30, &mut out).is_err());
+        assert!(out.capacity() < 1 << 20, "{}", out.capacity());
+        // The hint: never beyond what the stream can hold, nor beyond the block's size.
+        assert_eq!(inflate_hint(8, 1 << 30), 8 * 1032 + INFLATE_SLACK);
+        assert_eq!(inflate_hint(1000, 4000), 4000 + INFLATE_SLACK);
     }
 
     /// A directory of the shared data set, as the integration tests find it
