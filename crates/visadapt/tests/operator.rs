@@ -1,5 +1,8 @@
 //! The whole operator against values computed independently from the paper's equations.
 
+mod common;
+
+use common::{tp, ts};
 use visadapt::operator::{ViewingConditions, map, plan};
 use visadapt::{HdrImage, View};
 
@@ -14,28 +17,6 @@ fn uniform(w: usize, h: usize, xyz: [f32; 3], scotopic: Option<f32>) -> HdrImage
     im.scotopic = scotopic.map(|s| vec![s; w * h]);
     im.absolute_units = true;
     im
-}
-
-/// Eq. 4 and Eq. 5 written out again here, independently of the library.
-fn tp(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -2.6 {
-        -0.72
-    } else if x >= 1.9 {
-        x - 1.255
-    } else {
-        (0.249 * x + 0.65).powf(2.7) - 0.72
-    })
-}
-fn ts(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -3.94 {
-        -2.86
-    } else if x >= -1.44 {
-        x - 0.395
-    } else {
-        (0.405 * x + 1.6).powf(2.18) - 2.86
-    })
 }
 
 fn no_blur() -> ViewingConditions {

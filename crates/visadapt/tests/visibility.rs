@@ -2,32 +2,11 @@
 
 mod common;
 
+use common::{tp, ts};
 use visadapt::local::AdaptationMap;
 use visadapt::operator::ViewingConditions;
 use visadapt::visibility::{Adaptation, Sensitivity, Viewer, converged, difference, tolerance_map};
 use visadapt::{HdrImage, Limits, Projection, View, io};
-
-/// Eq. 4 and Eq. 5 written out again here, independently of the library.
-fn tp(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -2.6 {
-        -0.72
-    } else if x >= 1.9 {
-        x - 1.255
-    } else {
-        (0.249 * x + 0.65).powf(2.7) - 0.72
-    })
-}
-fn ts(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -3.94 {
-        -2.86
-    } else if x >= -1.44 {
-        x - 0.395
-    } else {
-        (0.405 * x + 1.6).powf(2.18) - 2.86
-    })
-}
 
 /// Scotopic/photopic ratio of equal-energy white (1700·∫V'/(683·∫V)).
 const SP_WHITE: f32 = 2.261;

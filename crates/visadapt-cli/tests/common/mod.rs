@@ -5,6 +5,12 @@ use assert_cmd::Command;
 use std::path::{Path, PathBuf};
 use visadapt::HdrImage;
 
+/// Eq. 4 and Eq. 5, shared with the library's own tests.
+#[path = "../../../visadapt/tests/common/paper.rs"]
+mod paper;
+#[allow(unused_imports)] // Not every test binary uses both.
+pub use paper::{tp, ts};
+
 pub fn visadapt() -> Command {
     Command::cargo_bin("visadapt").unwrap()
 }
@@ -13,18 +19,6 @@ pub fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../visadapt/tests/data")
         .join(name)
-}
-
-/// Eq. 4, written out independently of the library.
-pub fn tp(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -2.6 {
-        -0.72
-    } else if x >= 1.9 {
-        x - 1.255
-    } else {
-        (0.249 * x + 0.65).powf(2.7) - 0.72
-    })
 }
 
 pub fn json(out: &[u8]) -> serde_json::Value {
@@ -45,18 +39,6 @@ pub fn one_line_error(stderr: &[u8]) -> String {
     assert_eq!(s.trim_end().lines().count(), 1, "not one line: {s:?}");
     assert!(!s.contains("panicked"), "{s}");
     s
-}
-
-/// Eq. 5, written out independently of the library.
-pub fn ts(l: f64) -> f64 {
-    let x = l.log10();
-    10f64.powf(if x <= -3.94 {
-        -2.86
-    } else if x >= -1.44 {
-        x - 0.395
-    } else {
-        (0.405 * x + 1.6).powf(2.18) - 2.86
-    })
 }
 
 /// A usage error in clap's own form: `error: ...`, then the pointer to `--help`.

@@ -3,6 +3,10 @@
 
 use std::path::PathBuf;
 
+pub mod paper;
+#[allow(unused_imports)] // Not every test binary uses both.
+pub use paper::{tp, ts};
+
 /// A file committed under `crates/visadapt/tests/data/`.
 pub fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
