@@ -15,6 +15,8 @@
 //!
 //! `cargo bench -p visadapt --bench local -- --warm-up-time 1 --measurement-time 3`
 
+mod common;
+
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use visadapt::local::{self, LocalAdaptation, LocalMapping};
@@ -23,21 +25,7 @@ use visadapt::{DisplayImage, HdrImage, View};
 
 /// Four log units left to right, a fine checker, a colour cast varying over the frame.
 fn frame(w: usize, h: usize) -> HdrImage {
-    let mut im = HdrImage::zeros(w, h);
-    for j in 0..h {
-        for i in 0..w {
-            let k = j * w + i;
-            let u = i as f32 / w as f32;
-            let v = j as f32 / h as f32;
-            let check = if (i / 4 + j / 4) % 2 == 0 { 1.0 } else { 0.3 };
-            let l = 100.0 * 10f32.powf(-4.0 * u) * (0.5 + 0.5 * v) * check;
-            im.x[k] = l * (0.8 + 0.3 * v);
-            im.y[k] = l;
-            im.z[k] = l * (1.2 - 0.4 * u);
-        }
-    }
-    im.absolute_units = true;
-    im
+    common::textured(w, h, |u, v| 100.0 * 10f32.powf(-4.0 * u) * (0.5 + 0.5 * v))
 }
 
 fn conditions(w: usize, h: usize, adaptation: AdaptationMode) -> ViewingConditions {

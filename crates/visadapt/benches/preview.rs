@@ -5,29 +5,13 @@
 //!
 //! `cargo bench -p visadapt --bench preview -- --warm-up-time 1 --measurement-time 3`
 
+mod common;
+
+use common::frame;
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use visadapt::operator::{ViewingConditions, apply_into, plan};
 use visadapt::{DisplayImage, HdrImage, View, preview};
-
-/// The textured frame of the operator bench: gradients times a fine checker.
-fn frame(w: usize, h: usize, peak: f32) -> HdrImage {
-    let mut im = HdrImage::zeros(w, h);
-    for j in 0..h {
-        for i in 0..w {
-            let k = j * w + i;
-            let u = i as f32 / w as f32;
-            let v = j as f32 / h as f32;
-            let check = if (i / 4 + j / 4) % 2 == 0 { 1.0 } else { 0.3 };
-            let l = peak * (0.05 + 0.95 * u * v) * check;
-            im.x[k] = l * (0.8 + 0.3 * v);
-            im.y[k] = l;
-            im.z[k] = l * (1.2 - 0.4 * u);
-        }
-    }
-    im.absolute_units = true;
-    im
-}
 
 fn bench(c: &mut Criterion) {
     let (w, h, pw) = (1920usize, 1080usize, 1280usize);

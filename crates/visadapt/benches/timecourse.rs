@@ -14,9 +14,11 @@
 //! The stream alternates between two frames a decade apart in luminance, so every frame
 //! is a change of adaptation. Run with `cargo bench -p visadapt --bench timecourse`.
 
+mod common;
+
+use common::frame;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
-use visadapt::HdrImage;
 use visadapt::operator::{self, ViewingConditions};
 use visadapt::timecourse::Adaptation;
 
@@ -24,32 +26,8 @@ const WIDTH: usize = 1920;
 const HEIGHT: usize = 1080;
 const FPS: f64 = 30.0;
 
-/// A textured HDR frame with highest luminance about `peak` cd/m² and a colour cast that
-/// varies over the frame (as in the operator benchmark).
-fn frame(peak: f32) -> HdrImage {
-    let mut im = HdrImage::zeros(WIDTH, HEIGHT);
-    for j in 0..HEIGHT {
-        for i in 0..WIDTH {
-            let k = j * WIDTH + i;
-            let u = i as f32 / WIDTH as f32;
-            let v = j as f32 / HEIGHT as f32;
-            let check = if (i / 4 + j / 4).is_multiple_of(2) {
-                1.0
-            } else {
-                0.3
-            };
-            let l = peak * (0.05 + 0.95 * u * v) * check;
-            im.x[k] = l * (0.8 + 0.3 * v);
-            im.y[k] = l;
-            im.z[k] = l * (1.2 - 0.4 * u);
-        }
-    }
-    im.absolute_units = true;
-    im
-}
-
 fn bench(c: &mut Criterion) {
-    let frames = [frame(100.0), frame(1000.0)];
+    let frames = [frame(WIDTH, HEIGHT, 100.0), frame(WIDTH, HEIGHT, 1000.0)];
     let mut g = c.benchmark_group("timecourse");
     g.sample_size(20);
     g.throughput(Throughput::Elements((WIDTH * HEIGHT) as u64));
