@@ -5,6 +5,8 @@
 //!
 //! * `encode/png/1920x1080/{fast,fastest,rle}`: [`write_png_with`] at 8 bits per channel,
 //!   into a reused buffer (sRGB encoding, filtering and deflate in parallel row bands);
+//! * `encode/png16/1920x1080/fast`: the same at 16 bits per channel (`visadapt map
+//!   --bits 16`);
 //! * `encode/srgb8/1920x1080`: the sRGB transfer alone ([`to_srgb8`], interleaved 8-bit
 //!   codes), for the share of the transfer in the above.
 //!
@@ -77,6 +79,16 @@ fn bench(c: &mut Criterion) {
             })
         });
     }
+    bytes.clear();
+    write_png_with(&image, 16, PngCompression::Fast, &mut bytes).unwrap();
+    eprintln!("encode/png16/{size}/fast: {} bytes", bytes.len());
+    group.bench_function(BenchmarkId::new(format!("png16/{size}"), "fast"), |b| {
+        b.iter(|| {
+            bytes.clear();
+            write_png_with(&image, 16, PngCompression::Fast, &mut bytes).unwrap();
+            bytes.len()
+        })
+    });
     group.bench_function(BenchmarkId::new("srgb8", &size), |b| {
         b.iter(|| to_srgb8(&image).len())
     });
