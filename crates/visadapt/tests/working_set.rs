@@ -103,12 +103,17 @@ fn map_owned_and_the_exr_writer_allocate_no_second_image() {
     let conditions = ViewingConditions::default();
     let input = scene(w, h);
 
+    // One call first, unmeasured: the per-thread scratch the blur keeps between calls is
+    // then sized for this image. Otherwise scratch left by another test may be freed
+    // during the measured call, and the peak beyond the live bytes at its start come out
+    // under the display image itself (seen: 12.00 B/pixel, just under, one run in four).
+    drop(map(&input, &conditions).unwrap());
     // map keeps the input and makes a display image: 12 more bytes per pixel.
     let (by_ref, extra) = peak_extra(|| map(&input, &conditions).unwrap());
     let map_bpp = extra as f64 / n;
     assert!(
         map_bpp >= 12.0,
-        "map: {map_bpp:.2} bytes per pixel beyond the input"
+        "map: {map_bpp:.4} bytes per pixel beyond the input"
     );
 
     // map_owned writes the display over the input's planes: no second image (that would be
