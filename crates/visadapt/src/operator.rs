@@ -586,21 +586,21 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
     let (x, y, z) = (&image.x, &image.y, &image.z);
     let (hv, hv_s, scotopic_source) = match &image.scotopic {
         Some(s) => {
-            let fill = |start: usize, out: &mut [[f32; 2]]| {
-                let end = start + out.len();
-                for (o, (y, s)) in out.iter_mut().zip(y[start..end].iter().zip(&s[start..end])) {
-                    *o = [*y, *s];
-                }
+            let fill = |start: usize, [oy, os]: [&mut [f32]; 2]| {
+                let end = start + oy.len();
+                oy.copy_from_slice(&y[start..end]);
+                os.copy_from_slice(&s[start..end]);
             };
             let [hv, hv_s] = highest_visible_of(image.len(), fill, fraction);
             (hv as f64, hv_s as f64, Source::File)
         }
         None => {
-            let fill = |start: usize, out: &mut [[f32; 2]]| {
-                let end = start + out.len();
+            let fill = |start: usize, [oy, os]: [&mut [f32]; 2]| {
+                let end = start + oy.len();
+                oy.copy_from_slice(&y[start..end]);
                 let xyz = x[start..end].iter().zip(&y[start..end]).zip(&z[start..end]);
-                for (o, ((x, y), z)) in out.iter_mut().zip(xyz) {
-                    *o = [*y, scotopic::from_xyz(*x, *y, *z)];
+                for (o, ((x, y), z)) in os.iter_mut().zip(xyz) {
+                    *o = scotopic::from_xyz(*x, *y, *z);
                 }
             };
             let [hv, hv_s] = highest_visible_of(image.len(), fill, fraction);
