@@ -36,28 +36,21 @@ pub const ADAPTATION_FRACTION: f64 = 0.5;
 /// `(1 − fraction)` quantile, taking the next sample up). Non-finite and negative samples
 /// count as 0. Returns 0 for an empty slice. `fraction` is clamped to [0, 1].
 pub fn highest_visible(values: &[f32], fraction: f64) -> f32 {
-    highest_visible_of(
-        values.len(),
-        |start, [out]: [&mut [f32]; 1]| {
-            out.copy_from_slice(&values[start..start + out.len()]);
-        },
-        fraction,
-    )[0]
+    highest_visible_of(values.len(), [values], fraction)[0]
 }
 
 /// [`highest_visible`] of `K` channels at once (e.g. photopic and scotopic luminance),
-/// without a buffer for derived channels: `fill(start, planes)` writes the values of
-/// pixels `start..start + len` of channel `k` into `planes[k]` (each of length `len`, at
-/// most [`BLOCK`]), one plane per channel so that each channel's loop is a plain vector
-/// loop (pixels interleaved as `[[f32; K]]` cost shuffles in `fill` and in every loop
-/// after it).
+/// without a buffer for derived channels: `fill` hands out the values of the pixels a
+/// block at a time, one plane per channel ([`Blocks`]; a closure
+/// `fill(start, planes)` that writes pixels `start..start + len` of channel `k` into
+/// `planes[k]` is one, and so are `K` slices).
 ///
 /// Exact, in two histogram passes over the IEEE-754 bit pattern (which orders like the
 /// value for non-negative floats): the high 16 bits find the bin holding the wanted rank,
 /// the low 16 bits of the samples in that bin find the sample itself.
 pub fn highest_visible_of<const K: usize>(
     n: usize,
-    fill: impl Fn(usize, [&mut [f32]; K]) + Sync,
+    fill: impl Blocks<K>,
     fraction: f64,
 ) -> [f32; K] {
     if n == 0 {
@@ -80,11 +73,7 @@ pub fn highest_visible_of<const K: usize>(
 }
 
 /// The two-pass histogram quantile: the sample of `rank` (ascending) of each channel.
-fn by_histogram<const K: usize>(
-    n: usize,
-    fill: &(impl Fn(usize, [&mut [f32]; K]) + Sync),
-    rank: usize,
-) -> [f32; K] {
+fn by_histogram<const K: usize>(n: usize, fill: &impl Blocks<K>, rank: usize) -> [f32; K] {
     let high = high_histograms::<K>(n, fill);
     let located: [(u32, usize); K] = std::array::from_fn(|k| locate(&high[k], rank));
     let low = low_histograms::<K>(n, fill, located.map(|l| l.0));
@@ -142,7 +131,51 @@ fn plane_max(plane: &[f32]) -> u32 {
     lanes.into_iter().chain(tail).max().unwrap_or(0)
 }
 
-/// The block buffers of `fill`: one plane of [`BLOCK`] values per channel.
+/// The values of `K` channels of `n` pixels, handed out a block of at most [`BLOCK`]
+/// pixels at a time, one plane per channel (so that each channel's loop is a plain vector
+/// loop: pixels interleaved as `[[f32; K]]` cost shuffles in every loop over them).
+pub trait Blocks<const K: usize>: Sync {
+    /// The values of pixels `start..start + len` (`len` ≤ [`BLOCK`]) of each channel:
+    /// slices of the caller's planes where the channel is stored, or written into
+    /// `scratch` (its first `len` values) where it is derived.
+    fn block<'s>(
+        &'s self,
+        start: usize,
+        len: usize,
+        scratch: &'s mut [[f32; BLOCK]; K],
+    ) -> [&'s [f32]; K];
+}
+
+/// A closure `fill(start, planes)` writing the values of pixels `start..start + len` of
+/// channel `k` into `planes[k]` (of length `len`).
+impl<const K: usize, F: Fn(usize, [&mut [f32]; K]) + Sync> Blocks<K> for F {
+    #[inline(always)]
+    fn block<'s>(
+        &'s self,
+        start: usize,
+        len: usize,
+        scratch: &'s mut [[f32; BLOCK]; K],
+    ) -> [&'s [f32]; K] {
+        self(start, scratch.each_mut().map(|p| &mut p[..len]));
+        scratch.each_ref().map(|p| &p[..len])
+    }
+}
+
+/// Stored planes, one per channel, each at least as long as the pixel count: handed out
+/// as they are, without a copy.
+impl<const K: usize> Blocks<K> for [&[f32]; K] {
+    #[inline(always)]
+    fn block<'s>(
+        &'s self,
+        start: usize,
+        len: usize,
+        _scratch: &'s mut [[f32; BLOCK]; K],
+    ) -> [&'s [f32]; K] {
+        self.map(|p| &p[start..start + len])
+    }
+}
+
+/// The block buffers of a [`Blocks`]: one plane of [`BLOCK`] values per channel.
 struct Planes<const K: usize>([[f32; BLOCK]; K]);
 
 impl<const K: usize> Planes<K> {
@@ -150,16 +183,15 @@ impl<const K: usize> Planes<K> {
         Planes([[0.0; BLOCK]; K])
     }
 
-    /// Fill the first `len` values of each plane with pixels `start..start + len`.
+    /// The values of pixels `start..start + len` of each channel.
     #[inline(always)]
-    fn fill(
-        &mut self,
-        fill: &impl Fn(usize, [&mut [f32]; K]),
+    fn fill<'s>(
+        &'s mut self,
+        fill: &'s impl Blocks<K>,
         start: usize,
         len: usize,
-    ) -> [&[f32]; K] {
-        fill(start, self.0.each_mut().map(|p| &mut p[..len]));
-        self.0.each_ref().map(|p| &p[..len])
+    ) -> [&'s [f32]; K] {
+        fill.block(start, len, &mut self.0)
     }
 }
 
@@ -246,11 +278,7 @@ const GUESS_MIN_ABOVE: usize = 32;
 /// brightness grows down the rows almost every key raised the running floor and paid for
 /// it); [`top_k`] checks that at least `keep` keys were above it and otherwise searches
 /// again from 0, so the answer stays exact. 0 (no guess) when the sample is too small.
-fn floor_guess<const K: usize>(
-    n: usize,
-    fill: &impl Fn(usize, [&mut [f32]; K]),
-    keep: usize,
-) -> [u32; K] {
+fn floor_guess<const K: usize>(n: usize, fill: &impl Blocks<K>, keep: usize) -> [u32; K] {
     let size = n.div_ceil(GUESS_STRIDE) * GUESS_RUN;
     let mut sample: [Vec<u32>; K] = std::array::from_fn(|_| Vec::with_capacity(size));
     let mut planes = Planes::<K>::new();
@@ -271,11 +299,7 @@ fn floor_guess<const K: usize>(
 }
 
 /// The one-pass quantile: the `keep`-th largest sample of each channel.
-fn top_k<const K: usize>(
-    n: usize,
-    fill: &(impl Fn(usize, [&mut [f32]; K]) + Sync),
-    keep: usize,
-) -> [f32; K] {
+fn top_k<const K: usize>(n: usize, fill: &impl Blocks<K>, keep: usize) -> [f32; K] {
     let guess = floor_guess::<K>(n, fill, keep);
     if let Some(found) = top_k_above(n, fill, keep, guess) {
         return found;
@@ -289,7 +313,7 @@ fn top_k<const K: usize>(
 /// answer is then 0).
 fn top_k_above<const K: usize>(
     n: usize,
-    fill: &(impl Fn(usize, [&mut [f32]; K]) + Sync),
+    fill: &impl Blocks<K>,
     keep: usize,
     floor: [u32; K],
 ) -> Option<[f32; K]> {
@@ -300,7 +324,7 @@ fn top_k_above<const K: usize>(
 fn top_k_above_on<const K: usize>(
     isa: Isa,
     n: usize,
-    fill: &(impl Fn(usize, [&mut [f32]; K]) + Sync),
+    fill: &impl Blocks<K>,
     keep: usize,
     floor: [u32; K],
 ) -> Option<[f32; K]> {
@@ -336,7 +360,7 @@ fn top_k_above_on<const K: usize>(
 #[inline(always)]
 fn offer_range<const K: usize>(
     range: std::ops::Range<usize>,
-    fill: &impl Fn(usize, [&mut [f32]; K]),
+    fill: &impl Blocks<K>,
     top: &mut [Brightest; K],
 ) {
     let mut planes = Planes::<K>::new();
@@ -360,10 +384,7 @@ fn offer_range<const K: usize>(
 }
 
 /// Histograms of the high 16 bits of each channel.
-fn high_histograms<const K: usize>(
-    n: usize,
-    fill: &(impl Fn(usize, [&mut [f32]; K]) + Sync),
-) -> Vec<Vec<u64>> {
+fn high_histograms<const K: usize>(n: usize, fill: &impl Blocks<K>) -> Vec<Vec<u64>> {
     histograms::<K>(n, |range, h| {
         for_each_block(range, fill, |block| {
             for (h, plane) in h.iter_mut().zip(block) {
@@ -378,7 +399,7 @@ fn high_histograms<const K: usize>(
 /// Histograms of the low 16 bits of the samples whose high 16 bits equal `bins[k]`.
 fn low_histograms<const K: usize>(
     n: usize,
-    fill: &(impl Fn(usize, [&mut [f32]; K]) + Sync),
+    fill: &impl Blocks<K>,
     bins: [u32; K],
 ) -> Vec<Vec<u64>> {
     histograms::<K>(n, |range, h| {
@@ -400,7 +421,7 @@ fn low_histograms<const K: usize>(
 #[inline(always)]
 fn for_each_block<const K: usize>(
     range: std::ops::Range<usize>,
-    fill: &impl Fn(usize, [&mut [f32]; K]),
+    fill: &impl Blocks<K>,
     mut f: impl FnMut([&[f32]; K]),
 ) {
     let mut planes = Planes::<K>::new();
