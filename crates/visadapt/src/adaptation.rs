@@ -252,10 +252,14 @@ impl Brightest {
 
     /// The `keep`-th largest sample, `None` if fewer than `keep` are above the floor
     /// the search started from.
-    fn answer(mut self) -> Option<f32> {
+    fn answer(self) -> Option<f32> {
+        self.answer_key().map(f32::from_bits)
+    }
+
+    /// [`Brightest::answer`] as its ordering key.
+    fn answer_key(mut self) -> Option<u32> {
         self.cut();
-        (self.keys.len() >= self.keep)
-            .then(|| f32::from_bits(*self.keys.iter().min().expect("keep ≥ 1")))
+        (self.keys.len() >= self.keep).then(|| *self.keys.iter().min().expect("keep ≥ 1"))
     }
 }
 
@@ -279,23 +283,33 @@ const GUESS_MIN_ABOVE: usize = 32;
 /// it); [`top_k`] checks that at least `keep` keys were above it and otherwise searches
 /// again from 0, so the answer stays exact. 0 (no guess) when the sample is too small.
 fn floor_guess<const K: usize>(n: usize, fill: &impl Blocks<K>, keep: usize) -> [u32; K] {
-    let size = n.div_ceil(GUESS_STRIDE) * GUESS_RUN;
-    let mut sample: [Vec<u32>; K] = std::array::from_fn(|_| Vec::with_capacity(size));
-    let mut planes = Planes::<K>::new();
-    for start in (0..n).step_by(GUESS_STRIDE) {
-        let len = GUESS_RUN.min(n - start);
-        let block = planes.fill(fill, start, len);
-        for (s, plane) in sample.iter_mut().zip(block) {
-            s.extend(plane.iter().map(|v| order_bits(*v)));
-        }
-    }
-    let m = sample[0].len();
+    // The sample's size: one run at every stride, the last one cut at the image's end.
+    let runs = n.div_ceil(GUESS_STRIDE);
+    let m = match runs {
+        0 => 0,
+        r => (r - 1) * GUESS_RUN + GUESS_RUN.min(n - (r - 1) * GUESS_STRIDE),
+    };
     // The sample's j-th largest key has about j·n/m keys of the image above it.
     let above = (GUESS_MARGIN * keep).saturating_mul(m) / n.max(1);
     if above < GUESS_MIN_ABOVE || above >= m {
         return [0; K];
     }
-    sample.map(|mut s| *s.select_nth_unstable(m - 1 - above).1)
+    // The sample's key of rank `above` from the top, found as the one-pass quantile
+    // finds its own: only the brightest sampled keys are kept (a buffer of a few KiB,
+    // where the whole sample, 2 × 130 KiB at 1080p, was a fresh mapping per call).
+    let mut top: [Brightest; K] = std::array::from_fn(|_| Brightest::new(above + 1, 0));
+    let mut planes = Planes::<K>::new();
+    for start in (0..n).step_by(GUESS_STRIDE) {
+        let len = GUESS_RUN.min(n - start);
+        let block = planes.fill(fill, start, len);
+        for (top, plane) in top.iter_mut().zip(block) {
+            for v in plane {
+                top.offer(order_bits(*v));
+            }
+        }
+    }
+    // Fewer than `above + 1` positive keys in the sample: the key of that rank is 0.
+    top.map(|t| t.answer_key().unwrap_or(0))
 }
 
 /// The one-pass quantile: the `keep`-th largest sample of each channel.
