@@ -36,27 +36,21 @@ pub const ADAPTATION_FRACTION: f64 = 0.5;
 /// `(1 − fraction)` quantile, taking the next sample up). Non-finite and negative samples
 /// count as 0. Returns 0 for an empty slice. `fraction` is clamped to [0, 1].
 pub fn highest_visible(values: &[f32], fraction: f64) -> f32 {
-    highest_visible_of(
-        values.len(),
-        |start, out: &mut [[f32; 1]]| {
-            for (o, v) in out.iter_mut().zip(&values[start..]) {
-                *o = [*v];
-            }
-        },
-        fraction,
-    )[0]
+    highest_visible_of(values.len(), [values], fraction)[0]
 }
 
 /// [`highest_visible`] of `K` channels at once (e.g. photopic and scotopic luminance),
-/// without a buffer for derived channels: `fill(start, block)` writes the values of pixels
-/// `start..start + block.len()` into `block`.
+/// without a buffer for derived channels: `fill` hands out the values of the pixels a
+/// block at a time, one plane per channel ([`Blocks`]; a closure
+/// `fill(start, planes)` that writes pixels `start..start + len` of channel `k` into
+/// `planes[k]` is one, and so are `K` slices).
 ///
 /// Exact, in two histogram passes over the IEEE-754 bit pattern (which orders like the
 /// value for non-negative floats): the high 16 bits find the bin holding the wanted rank,
 /// the low 16 bits of the samples in that bin find the sample itself.
 pub fn highest_visible_of<const K: usize>(
     n: usize,
-    fill: impl Fn(usize, &mut [[f32; K]]) + Sync,
+    fill: impl Blocks<K>,
     fraction: f64,
 ) -> [f32; K] {
     if n == 0 {
@@ -79,11 +73,7 @@ pub fn highest_visible_of<const K: usize>(
 }
 
 /// The two-pass histogram quantile: the sample of `rank` (ascending) of each channel.
-fn by_histogram<const K: usize>(
-    n: usize,
-    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
-    rank: usize,
-) -> [f32; K] {
+fn by_histogram<const K: usize>(n: usize, fill: &impl Blocks<K>, rank: usize) -> [f32; K] {
     let high = high_histograms::<K>(n, fill);
     let located: [(u32, usize); K] = std::array::from_fn(|k| locate(&high[k], rank));
     let low = low_histograms::<K>(n, fill, located.map(|l| l.0));
@@ -108,7 +98,7 @@ fn locate(counts: &[u64], rank: usize) -> (u32, usize) {
 /// Bins of each histogram (16 bits of the float).
 const BINS: usize = 1 << 16;
 /// Pixels per block handed to `fill`.
-const BLOCK: usize = 1024;
+pub const BLOCK: usize = 1024;
 /// Pixels per parallel work item.
 const CHUNK: usize = 1 << 20;
 
@@ -125,11 +115,83 @@ fn order_bits(v: f32) -> u32 {
     }
 }
 
-/// Fill `keys` with the ordering bit patterns of a block (a loop the compiler vectorises).
+/// The largest ordering key of a plane: a maximum over lanes of 16 values at a time
+/// (independent lanes, which the compiler vectorises at any width), then across them.
 #[inline(always)]
-fn block_keys<const K: usize>(block: &[[f32; K]], keys: &mut [[u32; K]]) {
-    for (k, v) in keys.iter_mut().zip(block) {
-        *k = v.map(order_bits);
+fn plane_max(plane: &[f32]) -> u32 {
+    const LANES: usize = 16;
+    let mut lanes = [0u32; LANES];
+    let mut chunks = plane.chunks_exact(LANES);
+    for chunk in &mut chunks {
+        for (lane, v) in lanes.iter_mut().zip(chunk) {
+            *lane = (*lane).max(order_bits(*v));
+        }
+    }
+    let tail = chunks.remainder().iter().map(|v| order_bits(*v));
+    lanes.into_iter().chain(tail).max().unwrap_or(0)
+}
+
+/// The values of `K` channels of `n` pixels, handed out a block of at most [`BLOCK`]
+/// pixels at a time, one plane per channel (so that each channel's loop is a plain vector
+/// loop: pixels interleaved as `[[f32; K]]` cost shuffles in every loop over them).
+pub trait Blocks<const K: usize>: Sync {
+    /// The values of pixels `start..start + len` (`len` ≤ [`BLOCK`]) of each channel:
+    /// slices of the caller's planes where the channel is stored, or written into
+    /// `scratch` (its first `len` values) where it is derived.
+    fn block<'s>(
+        &'s self,
+        start: usize,
+        len: usize,
+        scratch: &'s mut [[f32; BLOCK]; K],
+    ) -> [&'s [f32]; K];
+}
+
+/// A closure `fill(start, planes)` writing the values of pixels `start..start + len` of
+/// channel `k` into `planes[k]` (of length `len`).
+impl<const K: usize, F: Fn(usize, [&mut [f32]; K]) + Sync> Blocks<K> for F {
+    #[inline(always)]
+    fn block<'s>(
+        &'s self,
+        start: usize,
+        len: usize,
+        scratch: &'s mut [[f32; BLOCK]; K],
+    ) -> [&'s [f32]; K] {
+        self(start, scratch.each_mut().map(|p| &mut p[..len]));
+        scratch.each_ref().map(|p| &p[..len])
+    }
+}
+
+/// Stored planes, one per channel, each at least as long as the pixel count: handed out
+/// as they are, without a copy.
+impl<const K: usize> Blocks<K> for [&[f32]; K] {
+    #[inline(always)]
+    fn block<'s>(
+        &'s self,
+        start: usize,
+        len: usize,
+        _scratch: &'s mut [[f32; BLOCK]; K],
+    ) -> [&'s [f32]; K] {
+        self.map(|p| &p[start..start + len])
+    }
+}
+
+/// The block buffers of a [`Blocks`]: one plane of [`BLOCK`] values per channel.
+struct Planes<const K: usize>([[f32; BLOCK]; K]);
+
+impl<const K: usize> Planes<K> {
+    fn new() -> Self {
+        Planes([[0.0; BLOCK]; K])
+    }
+
+    /// The values of pixels `start..start + len` of each channel.
+    #[inline(always)]
+    fn fill<'s>(
+        &'s mut self,
+        fill: &'s impl Blocks<K>,
+        start: usize,
+        len: usize,
+    ) -> [&'s [f32]; K] {
+        fill.block(start, len, &mut self.0)
     }
 }
 
@@ -190,10 +252,14 @@ impl Brightest {
 
     /// The `keep`-th largest sample, `None` if fewer than `keep` are above the floor
     /// the search started from.
-    fn answer(mut self) -> Option<f32> {
+    fn answer(self) -> Option<f32> {
+        self.answer_key().map(f32::from_bits)
+    }
+
+    /// [`Brightest::answer`] as its ordering key.
+    fn answer_key(mut self) -> Option<u32> {
         self.cut();
-        (self.keys.len() >= self.keep)
-            .then(|| f32::from_bits(*self.keys.iter().min().expect("keep ≥ 1")))
+        (self.keys.len() >= self.keep).then(|| *self.keys.iter().min().expect("keep ≥ 1"))
     }
 }
 
@@ -216,39 +282,38 @@ const GUESS_MIN_ABOVE: usize = 32;
 /// brightness grows down the rows almost every key raised the running floor and paid for
 /// it); [`top_k`] checks that at least `keep` keys were above it and otherwise searches
 /// again from 0, so the answer stays exact. 0 (no guess) when the sample is too small.
-fn floor_guess<const K: usize>(
-    n: usize,
-    fill: &impl Fn(usize, &mut [[f32; K]]),
-    keep: usize,
-) -> [u32; K] {
-    let mut sample: [Vec<u32>; K] = std::array::from_fn(|_| Vec::new());
-    let mut block = [[0.0f32; K]; GUESS_RUN];
-    let mut keys = [[0u32; K]; GUESS_RUN];
-    for start in (0..n).step_by(GUESS_STRIDE) {
-        let len = GUESS_RUN.min(n - start);
-        fill(start, &mut block[..len]);
-        block_keys(&block[..len], &mut keys[..len]);
-        for px in &keys[..len] {
-            for k in 0..K {
-                sample[k].push(px[k]);
-            }
-        }
-    }
-    let m = sample[0].len();
+fn floor_guess<const K: usize>(n: usize, fill: &impl Blocks<K>, keep: usize) -> [u32; K] {
+    // The sample's size: one run at every stride, the last one cut at the image's end.
+    let runs = n.div_ceil(GUESS_STRIDE);
+    let m = match runs {
+        0 => 0,
+        r => (r - 1) * GUESS_RUN + GUESS_RUN.min(n - (r - 1) * GUESS_STRIDE),
+    };
     // The sample's j-th largest key has about j·n/m keys of the image above it.
     let above = (GUESS_MARGIN * keep).saturating_mul(m) / n.max(1);
     if above < GUESS_MIN_ABOVE || above >= m {
         return [0; K];
     }
-    sample.map(|mut s| *s.select_nth_unstable(m - 1 - above).1)
+    // The sample's key of rank `above` from the top, found as the one-pass quantile
+    // finds its own: only the brightest sampled keys are kept (a buffer of a few KiB,
+    // where the whole sample, 2 × 130 KiB at 1080p, was a fresh mapping per call).
+    let mut top: [Brightest; K] = std::array::from_fn(|_| Brightest::new(above + 1, 0));
+    let mut planes = Planes::<K>::new();
+    for start in (0..n).step_by(GUESS_STRIDE) {
+        let len = GUESS_RUN.min(n - start);
+        let block = planes.fill(fill, start, len);
+        for (top, plane) in top.iter_mut().zip(block) {
+            for v in plane {
+                top.offer(order_bits(*v));
+            }
+        }
+    }
+    // Fewer than `above + 1` positive keys in the sample: the key of that rank is 0.
+    top.map(|t| t.answer_key().unwrap_or(0))
 }
 
 /// The one-pass quantile: the `keep`-th largest sample of each channel.
-fn top_k<const K: usize>(
-    n: usize,
-    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
-    keep: usize,
-) -> [f32; K] {
+fn top_k<const K: usize>(n: usize, fill: &impl Blocks<K>, keep: usize) -> [f32; K] {
     let guess = floor_guess::<K>(n, fill, keep);
     if let Some(found) = top_k_above(n, fill, keep, guess) {
         return found;
@@ -262,7 +327,7 @@ fn top_k<const K: usize>(
 /// answer is then 0).
 fn top_k_above<const K: usize>(
     n: usize,
-    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
+    fill: &impl Blocks<K>,
     keep: usize,
     floor: [u32; K],
 ) -> Option<[f32; K]> {
@@ -273,7 +338,7 @@ fn top_k_above<const K: usize>(
 fn top_k_above_on<const K: usize>(
     isa: Isa,
     n: usize,
-    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
+    fill: &impl Blocks<K>,
     keep: usize,
     floor: [u32; K],
 ) -> Option<[f32; K]> {
@@ -309,26 +374,22 @@ fn top_k_above_on<const K: usize>(
 #[inline(always)]
 fn offer_range<const K: usize>(
     range: std::ops::Range<usize>,
-    fill: &impl Fn(usize, &mut [[f32; K]]),
+    fill: &impl Blocks<K>,
     top: &mut [Brightest; K],
 ) {
-    let mut block = [[0.0f32; K]; BLOCK];
-    let mut keys = [[0u32; K]; BLOCK];
+    let mut planes = Planes::<K>::new();
     let mut start = range.start;
     while start < range.end {
         let len = BLOCK.min(range.end - start);
-        fill(start, &mut block[..len]);
-        let keys = &mut keys[..len];
-        block_keys(&block[..len], keys);
+        let block = planes.fill(fill, start, len);
         // A block none of whose keys of a channel is above that channel's floor adds
         // nothing to it (`offer` would keep none): one vectorised maximum skips it.
         // Most blocks of a frame are below the floor once it has risen (the bright
         // samples are a fraction of a percent, and clustered).
-        let most = block_max(keys);
-        for k in 0..K {
-            if most[k] > top[k].floor {
-                for px in keys.iter() {
-                    top[k].offer(px[k]);
+        for (top, plane) in top.iter_mut().zip(block) {
+            if plane_max(plane) > top.floor {
+                for v in plane {
+                    top.offer(order_bits(*v));
                 }
             }
         }
@@ -337,14 +398,13 @@ fn offer_range<const K: usize>(
 }
 
 /// Histograms of the high 16 bits of each channel.
-fn high_histograms<const K: usize>(
-    n: usize,
-    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
-) -> Vec<Vec<u64>> {
+fn high_histograms<const K: usize>(n: usize, fill: &impl Blocks<K>) -> Vec<Vec<u64>> {
     histograms::<K>(n, |range, h| {
-        for_each_key(range, fill, |px| {
-            for k in 0..K {
-                h[k][(px[k] >> 16) as usize] += 1;
+        for_each_block(range, fill, |block| {
+            for (h, plane) in h.iter_mut().zip(block) {
+                for v in plane {
+                    h[(order_bits(*v) >> 16) as usize] += 1;
+                }
             }
         })
     })
@@ -353,70 +413,36 @@ fn high_histograms<const K: usize>(
 /// Histograms of the low 16 bits of the samples whose high 16 bits equal `bins[k]`.
 fn low_histograms<const K: usize>(
     n: usize,
-    fill: &(impl Fn(usize, &mut [[f32; K]]) + Sync),
+    fill: &impl Blocks<K>,
     bins: [u32; K],
 ) -> Vec<Vec<u64>> {
     histograms::<K>(n, |range, h| {
-        for_each_key(range, fill, |px| {
-            for k in 0..K {
-                let b = px[k];
-                if b >> 16 == bins[k] {
-                    h[k][(b & 0xffff) as usize] += 1;
+        for_each_block(range, fill, |block| {
+            for ((h, plane), bin) in h.iter_mut().zip(block).zip(bins) {
+                for v in plane {
+                    let b = order_bits(*v);
+                    if b >> 16 == bin {
+                        h[(b & 0xffff) as usize] += 1;
+                    }
                 }
             }
         })
     })
 }
 
-/// Call `f` with the ordering keys of every pixel of `range`, computed block by block.
-#[inline(always)]
-fn for_each_key<const K: usize>(
-    range: std::ops::Range<usize>,
-    fill: &impl Fn(usize, &mut [[f32; K]]),
-    mut f: impl FnMut(&[u32; K]),
-) {
-    for_each_block(range, fill, |keys| keys.iter().for_each(&mut f));
-}
-
-/// The largest key of each channel of a block: a maximum over lanes of four pixels at a
-/// time (independent lanes, which the compiler vectorises), then across the lanes.
-#[inline(always)]
-fn block_max<const K: usize>(keys: &[[u32; K]]) -> [u32; K] {
-    const PIXELS: usize = 4;
-    let mut lanes = [[0u32; K]; PIXELS];
-    let mut quads = keys.chunks_exact(PIXELS);
-    for quad in &mut quads {
-        for (lane, px) in lanes.iter_mut().zip(quad) {
-            for k in 0..K {
-                lane[k] = lane[k].max(px[k]);
-            }
-        }
-    }
-    let mut most = [0u32; K];
-    for px in lanes.iter().chain(quads.remainder()) {
-        for k in 0..K {
-            most[k] = most[k].max(px[k]);
-        }
-    }
-    most
-}
-
-/// Call `f` with the ordering keys of `range`, a block of up to [`BLOCK`] pixels at a
-/// time, in order.
+/// Call `f` with the values of `range`, a block of up to [`BLOCK`] pixels at a time, in
+/// order, one plane per channel.
 #[inline(always)]
 fn for_each_block<const K: usize>(
     range: std::ops::Range<usize>,
-    fill: &impl Fn(usize, &mut [[f32; K]]),
-    mut f: impl FnMut(&[[u32; K]]),
+    fill: &impl Blocks<K>,
+    mut f: impl FnMut([&[f32]; K]),
 ) {
-    let mut block = [[0.0f32; K]; BLOCK];
-    let mut keys = [[0u32; K]; BLOCK];
+    let mut planes = Planes::<K>::new();
     let mut start = range.start;
     while start < range.end {
         let len = BLOCK.min(range.end - start);
-        fill(start, &mut block[..len]);
-        block_keys(&block[..len], &mut keys[..len]);
-        f(&keys[..len]);
+        f(planes.fill(fill, start, len));
         start += len;
     }
 }
@@ -530,10 +556,8 @@ mod tests {
             .map(|i| if i % 50_000 == 3 { 2.0 } else { 0.0 })
             .collect();
         for v in [&noisy, &ramp, &few] {
-            let fill = |start: usize, out: &mut [[f32; 1]]| {
-                for (o, x) in out.iter_mut().zip(&v[start..]) {
-                    *o = [*x];
-                }
+            let fill = |start: usize, [out]: [&mut [f32]; 1]| {
+                out.copy_from_slice(&v[start..start + out.len()]);
             };
             for fraction in [0.0, 1e-6, 1e-4, 1e-3, 0.01, 0.02] {
                 let allowed = ((n as f64) * fraction).floor() as usize;
@@ -576,10 +600,9 @@ mod tests {
                 }
             })
             .collect();
-        let fill = |start: usize, out: &mut [[f32; 2]]| {
-            for (o, (x, y)) in out.iter_mut().zip(a[start..].iter().zip(&b[start..])) {
-                *o = [*x, *y];
-            }
+        let fill = |start: usize, [oa, ob]: [&mut [f32]; 2]| {
+            oa.copy_from_slice(&a[start..start + oa.len()]);
+            ob.copy_from_slice(&b[start..start + ob.len()]);
         };
         for fraction in [1e-4, 1e-3, 3e-3] {
             let got = highest_visible_of::<2>(n, fill, fraction);
@@ -631,10 +654,8 @@ mod tests {
             .collect();
         let brightening: Vec<f32> = (0..n).map(|i| (i / 1920) as f32 * (i % 7) as f32).collect();
         for v in [&bright_sampled, &dark_sampled, &brightening] {
-            let fill = |start: usize, out: &mut [[f32; 1]]| {
-                for (o, x) in out.iter_mut().zip(&v[start..]) {
-                    *o = [*x];
-                }
+            let fill = |start: usize, [out]: [&mut [f32]; 1]| {
+                out.copy_from_slice(&v[start..start + out.len()]);
             };
             for fraction in [1e-4, 1e-3, 0.01] {
                 let allowed = ((n as f64) * fraction).floor() as usize;
@@ -648,10 +669,8 @@ mod tests {
                 assert_eq!(one[0].to_bits(), two[0].to_bits(), "fraction {fraction}");
             }
         }
-        let fill = |start: usize, out: &mut [[f32; 1]]| {
-            for (o, x) in out.iter_mut().zip(&bright_sampled[start..]) {
-                *o = [*x];
-            }
+        let fill = |start: usize, [out]: [&mut [f32]; 1]| {
+            out.copy_from_slice(&bright_sampled[start..start + out.len()]);
         };
         // Here the guess is 5.0 itself: no key above it, so the second search ran.
         let keep = n / 1000;
@@ -674,10 +693,9 @@ mod tests {
         let b: Vec<f32> = (0..3000).map(|i| 1e-3 * ((i * 17) % 977) as f32).collect();
         let both = highest_visible_of(
             3000,
-            |start, out: &mut [[f32; 2]]| {
-                for (i, o) in out.iter_mut().enumerate() {
-                    *o = [a[start + i], b[start + i]];
-                }
+            |start, [oa, ob]: [&mut [f32]; 2]| {
+                oa.copy_from_slice(&a[start..start + oa.len()]);
+                ob.copy_from_slice(&b[start..start + ob.len()]);
             },
             0.01,
         );

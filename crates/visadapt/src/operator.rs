@@ -40,7 +40,8 @@
 
 use crate::acuity::{self, AcuityFilter, AcuityThreshold};
 use crate::adaptation::{
-    ADAPTATION_FRACTION, DEFAULT_DISPLAY_MAX_CD_M2, DEFAULT_HOT_PIXEL_FRACTION, highest_visible_of,
+    ADAPTATION_FRACTION, BLOCK, Blocks, DEFAULT_DISPLAY_MAX_CD_M2, DEFAULT_HOT_PIXEL_FRACTION,
+    highest_visible_of,
 };
 use crate::colour::{
     self, D65, IDENTITY, Mat3, WhitePoint, Xy, mul_mat, xyz_to_linear_srgb_matrix,
@@ -563,6 +564,36 @@ pub fn prepare_owned(
     Ok((image, report))
 }
 
+/// The photopic luminance `Y` (the image's own plane, not copied) and the scotopic
+/// luminance derived from `X, Y, Z`, for [`highest_visible_of`].
+struct LuminanceOfXyz<'a> {
+    x: &'a [f32],
+    y: &'a [f32],
+    z: &'a [f32],
+}
+
+impl Blocks<2> for LuminanceOfXyz<'_> {
+    #[inline(always)]
+    fn block<'s>(
+        &'s self,
+        start: usize,
+        len: usize,
+        scratch: &'s mut [[f32; BLOCK]; 2],
+    ) -> [&'s [f32]; 2] {
+        let end = start + len;
+        let (x, y, z) = (
+            &self.x[start..end],
+            &self.y[start..end],
+            &self.z[start..end],
+        );
+        let s = &mut scratch[1][..len];
+        for (o, ((x, y), z)) in s.iter_mut().zip(x.iter().zip(y).zip(z)) {
+            *o = scotopic::from_xyz(*x, *y, *z);
+        }
+        [y, s]
+    }
+}
+
 /// The report of the veiled scene `report`, completed from the report `without` glare.
 fn with_glare(mut report: Report, without: &Report, veil: VeilReport) -> Report {
     // The glare stage writes a scotopic plane; where it came from is the input's business.
@@ -586,23 +617,11 @@ pub fn plan(image: &HdrImage, conditions: &ViewingConditions) -> Result<Report> 
     let (x, y, z) = (&image.x, &image.y, &image.z);
     let (hv, hv_s, scotopic_source) = match &image.scotopic {
         Some(s) => {
-            let fill = |start: usize, out: &mut [[f32; 2]]| {
-                let end = start + out.len();
-                for (o, (y, s)) in out.iter_mut().zip(y[start..end].iter().zip(&s[start..end])) {
-                    *o = [*y, *s];
-                }
-            };
-            let [hv, hv_s] = highest_visible_of(image.len(), fill, fraction);
+            let [hv, hv_s] = highest_visible_of(image.len(), [&y[..], &s[..]], fraction);
             (hv as f64, hv_s as f64, Source::File)
         }
         None => {
-            let fill = |start: usize, out: &mut [[f32; 2]]| {
-                let end = start + out.len();
-                let xyz = x[start..end].iter().zip(&y[start..end]).zip(&z[start..end]);
-                for (o, ((x, y), z)) in out.iter_mut().zip(xyz) {
-                    *o = [*y, scotopic::from_xyz(*x, *y, *z)];
-                }
-            };
+            let fill = LuminanceOfXyz { x, y, z };
             let [hv, hv_s] = highest_visible_of(image.len(), fill, fraction);
             (hv as f64, hv_s as f64, Source::Image)
         }
