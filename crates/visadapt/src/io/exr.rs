@@ -48,7 +48,8 @@
 //! against the memory budget ([`Limits::max_memory_bytes`]) before they are allocated (the
 //! `exr` crate allocates a whole decompressed block before reading its data, and a failed
 //! allocation aborts the process); chunk offsets and sizes are checked against the file
-//! length. ZIP and ZIPS blocks are decompressed here (zlib-rs, into a reused buffer, then OpenEXR's predictor and byte interleaving undone
+//! length. ZIP and ZIPS blocks are decompressed here (zune-inflate, the inflater the `exr`
+//! crate uses, into a reused buffer, then OpenEXR's predictor and byte interleaving undone
 //! in one pass), the same bytes as the `exr` crate gives, checked by the tests against it;
 //! the other compressions through the `exr` crate. Each call into the `exr` crate or the
 //! inflater runs under `catch_unwind`, so a panic inside it becomes [`Error::Decode`], and
@@ -950,10 +951,6 @@ thread_local! {
     /// This thread's buffer for the reconstructed bytes of ZIP blocks (see
     /// [`zip_block`]), reused from block to block and from frame to frame.
     static ZIP_BUFFER: std::cell::Cell<Vec<u8>> = const { std::cell::Cell::new(Vec::new()) };
-    /// This thread's buffer for the inflated (not yet reconstructed) bytes of ZIP blocks
-    /// (see [`zip_block`]), reused as [`ZIP_BUFFER`] is.
-    static INFLATE_BUFFER: std::cell::Cell<Vec<u8>> =
-        const { std::cell::Cell::new(Vec::new()) };
 }
 
 /// Largest buffer [`ZIP_BUFFER`] keeps between blocks, bytes. Our choice: well above a
@@ -961,10 +958,11 @@ thread_local! {
 /// never reallocate it, while a huge block of a damaged or unusual file is not held on to.
 const MAX_KEPT_BUFFER: usize = 4 << 20;
 
-/// Bytes of memory a block in flight is counted for beyond its inflated and reconstructed
-/// copies (the budget, [`Budget::batch`]). Our margin, kept from when zune-inflate 0.2.54
-/// was the inflater (it needed 296 bytes of slack, `FASTLOOP_MAX_BYTES_WRITTEN`); zlib-rs
-/// inflates into exactly the block's size.
+/// Bytes of output buffer the inflater is given beyond the block's size. zune-inflate
+/// 0.2.54 grows (reallocates and copies) its output whenever it comes within
+/// `FASTLOOP_MAX_BYTES_WRITTEN` = 6 + 258 + 2·16 = 296 bytes of the end (`decoder.rs`,
+/// `constants.rs`), which an exact size would do at the end of every block; the slack
+/// avoids that. The limit (`set_limit`) stays the exact size.
 const INFLATE_SLACK: usize = 512;
 
 /// Largest ratio of inflated to compressed bytes a deflate stream can reach: 1032:1, a
@@ -972,10 +970,10 @@ const INFLATE_SLACK: usize = 512;
 /// "Technical Details", Mark Adler: "the limit is 1032:1").
 const DEFLATE_MAX_RATIO: usize = 1032;
 
-/// The inflated size a block of `compressed_len` bytes claiming `expected_len` can have,
-/// plus [`INFLATE_SLACK`]: the expected size, but never more than the stream could hold
-/// (below `expected_len + INFLATE_SLACK` when the claim is impossible, an error before
-/// anything is allocated).
+/// The output size zune-inflate allocates up front for a block of `compressed_len`
+/// bytes that should inflate to `expected_len`: the expected size plus
+/// [`INFLATE_SLACK`], but never more than the stream could hold, so that a damaged
+/// header claiming a huge block does not reserve its memory.
 fn inflate_hint(compressed_len: usize, expected_len: usize) -> usize {
     expected_len
         .min(compressed_len.saturating_mul(DEFLATE_MAX_RATIO))
@@ -989,50 +987,30 @@ fn inflate_hint(compressed_len: usize, expected_len: usize) -> usize {
 /// `expected_len` is an error), then [`reconstruct`]. The same bytes as the `exr` crate's
 /// `zip::decompress_bytes`, without its copies and allocations.
 ///
-/// The stream is inflated by zlib-rs straight into this thread's reused buffer
-/// ([`INFLATE_BUFFER`]), so a block costs no allocation, zeroing or page faults once the
-/// first block of that size has been decoded. A block claiming more bytes than its
-/// stream could hold ([`DEFLATE_MAX_RATIO`]) is an error before anything is allocated, so
-/// a damaged header claiming a huge block over a few bytes of data costs nothing.
+/// `out` is grown only once the block has inflated to its full size, so a damaged header
+/// that claims a huge block over a few bytes of data costs no more than those bytes.
 fn zip_block(data: &[u8], expected_len: usize, out: &mut Vec<u8>) -> Result<()> {
     if data.len() == expected_len {
         out.clear();
         out.extend_from_slice(data);
         return Ok(());
     }
-    if inflate_hint(data.len(), expected_len) < expected_len + INFLATE_SLACK {
-        return Err(invalid("ZIP-compressed block is malformed"));
-    }
-    let mut raw = INFLATE_BUFFER.with(std::cell::Cell::take);
-    if raw.len() < expected_len {
-        raw.resize(expected_len, 0);
-    }
+    let options = zune_inflate::DeflateOptions::default()
+        .set_limit(expected_len)
+        .set_size_hint(inflate_hint(data.len(), expected_len));
     // The inflater is foreign code on file data: guarded as the exr crate is.
     let inflated = foreign(|| {
-        let (done, code) = zlib_rs::decompress_slice(
-            &mut raw[..expected_len],
-            data,
-            zlib_rs::InflateConfig::default(),
-        );
-        match code {
-            zlib_rs::ReturnCode::Ok => Ok(done.len()),
-            _ => Err(invalid("ZIP-compressed block is malformed")),
-        }
-    });
-    let result = match inflated {
-        Ok(n) if n == expected_len => {
-            // Grown, never cleared: every byte is overwritten by `reconstruct`.
-            out.resize(expected_len, 0);
-            reconstruct(&raw[..expected_len], out);
-            Ok(())
-        }
-        Ok(_) => Err(invalid("decompressed block has the wrong size")),
-        Err(e) => Err(e),
-    };
-    if raw.len() <= MAX_KEPT_BUFFER {
-        INFLATE_BUFFER.with(|b| b.set(raw));
+        zune_inflate::DeflateDecoder::new_with_options(data, options)
+            .decode_zlib()
+            .map_err(|_| invalid("ZIP-compressed block is malformed"))
+    })?;
+    if inflated.len() != expected_len {
+        return Err(invalid("decompressed block has the wrong size"));
     }
-    result
+    // Grown, never cleared: every byte is overwritten by `reconstruct`.
+    out.resize(expected_len, 0);
+    reconstruct(&inflated, out);
+    Ok(())
 }
 
 /// Undo OpenEXR's ZIP preprocessing (`ImfZip.cpp`, `Zip::uncompress`): the predictor
