@@ -142,75 +142,61 @@ pub fn varying_gaussian_blur(
     }
     let mut tiles = Tiles::new(sigma_px, width, height);
     let levels = tiles.stack();
-    if levels.is_empty() || planes.is_empty() {
+    if levels.is_empty() {
         return;
     }
-    // All planes at once: one blur call per region for all of them (parallel over planes
-    // and rows) and one parallel pass adding each level in. The regions reach for the
-    // widest-ranged plane, which is at least each plane's own reach, so every plane is
-    // within its tolerance (and bit for bit below the recursive filter's sigmas).
-    let range = planes.iter().map(|p| value_range(p)).fold(0f64, f64::max);
-    // The unblurred copies of the planes and, per plane, one blurred rectangle beside it
-    // (at most 8 bytes per pixel of each plane).
-    let sources: Vec<Vec<f32>> = planes.iter().map(|p| p.to_vec()).collect();
-    // The unblurred part: pixels not blurred keep their values, the others start at 0.
-    let min_sigma = min_blur_sigma_f32();
+    // One plane at a time: its unblurred copy and one blurred rectangle beside it (at most
+    // 8 bytes per pixel).
+    let mut scratch = Vec::new();
     for p in planes.iter_mut() {
+        let range = value_range(p);
+        let source = p.to_vec();
+        // The unblurred part: pixels not blurred keep their values, the others start at 0.
+        let min_sigma = min_blur_sigma_f32();
         widest!(clear_blurred(p, sigma_px, min_sigma));
-    }
-    let mut scratch: Vec<Vec<f32>> = vec![Vec::new(); planes.len()];
-    for (j, &sigma) in levels.iter().enumerate() {
-        let reach = crate::blur::reach_px(sigma, REGION_TOLERANCE / range);
-        for region in tiles.regions(j, reach) {
-            let [x0, x1, y0, y1] = region.crop;
-            let cw = x1 - x0;
-            for (s, source) in scratch.iter_mut().zip(&sources) {
-                s.clear();
+        for (j, &sigma) in levels.iter().enumerate() {
+            let reach = crate::blur::reach_px(sigma, REGION_TOLERANCE / range);
+            for region in tiles.regions(j, reach) {
+                let [x0, x1, y0, y1] = region.crop;
+                let cw = x1 - x0;
+                scratch.clear();
                 // Exactly the rectangle (no growth beyond it: at most one plane).
-                s.reserve_exact(cw * (y1 - y0));
+                scratch.reserve_exact(cw * (y1 - y0));
                 for y in y0..y1 {
-                    s.extend_from_slice(&source[y * width + x0..y * width + x1]);
+                    scratch.extend_from_slice(&source[y * width + x0..y * width + x1]);
                 }
-            }
-            let mut blurred: Vec<&mut [f32]> =
-                scratch.iter_mut().map(|s| s.as_mut_slice()).collect();
-            crate::blur::gaussian_blur_planes(&mut blurred, cw, y1 - y0, sigma);
-            let scratch = &scratch;
-            // Row by row (in parallel, every plane's row in one job), each piece crossing
-            // the row.
-            let row = |y: usize, out: &mut [&mut [f32]]| {
-                for &[px0, px1, py0, py1] in &region.pieces {
-                    if (py0..py1).contains(&y) {
-                        let sig = &sigma_px[y * width + px0..y * width + px1];
-                        for (out, s) in out.iter_mut().zip(scratch) {
-                            let blurred = &s[(y - y0) * cw + px0 - x0..][..px1 - px0];
+                crate::blur::gaussian_blur_planes(
+                    &mut [scratch.as_mut_slice()],
+                    cw,
+                    y1 - y0,
+                    sigma,
+                );
+                // Row by row (in parallel), each piece crossing the row.
+                let row = |y: usize, out: &mut [f32]| {
+                    for &[px0, px1, py0, py1] in &region.pieces {
+                        if (py0..py1).contains(&y) {
+                            let blurred = &scratch[(y - y0) * cw + px0 - x0..][..px1 - px0];
+                            let sig = &sigma_px[y * width + px0..y * width + px1];
                             accumulate(&mut out[px0..px1], blurred, &levels, j, sig);
                         }
                     }
+                };
+                let (ry0, ry1) = region
+                    .pieces
+                    .iter()
+                    .fold((height, 0), |(a, b), r| (a.min(r[2]), b.max(r[3])));
+                let rows = &mut p[ry0 * width..ry1 * width];
+                #[cfg(feature = "rayon")]
+                {
+                    use rayon::prelude::*;
+                    rows.par_chunks_mut(width)
+                        .enumerate()
+                        .for_each(|(k, out)| row(ry0 + k, out));
                 }
-            };
-            let (ry0, ry1) = region
-                .pieces
-                .iter()
-                .fold((height, 0), |(a, b), r| (a.min(r[2]), b.max(r[3])));
-            let mut rows: Vec<Vec<&mut [f32]>> = (ry0..ry1)
-                .map(|_| Vec::with_capacity(planes.len()))
-                .collect();
-            for p in planes.iter_mut() {
-                for (k, out) in p[ry0 * width..ry1 * width].chunks_mut(width).enumerate() {
-                    rows[k].push(out);
+                #[cfg(not(feature = "rayon"))]
+                for (k, out) in rows.chunks_mut(width).enumerate() {
+                    row(ry0 + k, out);
                 }
-            }
-            #[cfg(feature = "rayon")]
-            {
-                use rayon::prelude::*;
-                rows.into_par_iter()
-                    .enumerate()
-                    .for_each(|(k, mut out)| row(ry0 + k, &mut out));
-            }
-            #[cfg(not(feature = "rayon"))]
-            for (k, mut out) in rows.into_iter().enumerate() {
-                row(ry0 + k, &mut out);
             }
         }
     }
@@ -563,9 +549,9 @@ mod tests {
         }
     }
 
-    /// Several planes blurred in one call, each of its own range (the regions reach for the
-    /// widest, so at least each plane's own): every plane is its whole-plane stack, bit for
-    /// bit with the exact kernel, within [`REGION_TOLERANCE`] with the recursive one.
+    /// Several planes blurred in one call, each of its own range: every plane is its
+    /// whole-plane stack, bit for bit with the exact kernel, within [`REGION_TOLERANCE`]
+    /// with the recursive one.
     #[test]
     fn planes_blurred_together_each_match_the_whole_plane_stack() {
         let (w, h) = (300, 200);
