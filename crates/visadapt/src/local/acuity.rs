@@ -549,6 +549,37 @@ mod tests {
         }
     }
 
+    /// Several planes blurred in one call, each of its own range: every plane is its
+    /// whole-plane stack, bit for bit with the exact kernel, within [`REGION_TOLERANCE`]
+    /// with the recursive one.
+    #[test]
+    fn planes_blurred_together_each_match_the_whole_plane_stack() {
+        let (w, h) = (300, 200);
+        for (lo, hi, exact) in [(0.3f32, 2.3f32, true), (2.0, 20.0, false)] {
+            let planes: Vec<(Vec<f32>, Vec<f32>)> = [1e4f32, 1.0, 30.0]
+                .iter()
+                .map(|&peak| scene(w, h, peak, lo, hi))
+                .collect();
+            let sigma = planes[0].1.clone();
+            let mut got: Vec<Vec<f32>> = planes.iter().map(|(p, _)| p.clone()).collect();
+            let mut views: Vec<&mut [f32]> = got.iter_mut().map(|p| p.as_mut_slice()).collect();
+            varying_gaussian_blur(&mut views, w, h, &sigma);
+            for ((plane, _), got) in planes.iter().zip(&got) {
+                let mut want = plane.clone();
+                reference_blur(&mut want, w, h, &sigma);
+                let mut worst = 0f64;
+                for (a, b) in got.iter().zip(&want) {
+                    if exact {
+                        assert_eq!(a.to_bits(), b.to_bits(), "σ {lo}..{hi}: {a} {b}");
+                    }
+                    let rounding = 4.0 * f64::from(f32::EPSILON) * f64::from(b.abs());
+                    worst = worst.max(f64::from((a - b).abs()) - rounding);
+                }
+                assert!(worst <= REGION_TOLERANCE, "σ {lo}..{hi}: {worst:e}");
+            }
+        }
+    }
+
     /// The regions are what makes it cheap: with a sigma field spanning ten levels, each
     /// level is blurred over a small part of the image (the sum over levels, with the
     /// reaches, under four images, against one image per level for the whole-plane stack).
