@@ -5,8 +5,8 @@ use visadapt::HdrImage;
 
 /// A textured HDR frame of `w × h` pixels: smooth gradients times a fine checker (4-pixel
 /// squares, 1 and 0.3), highest luminance about `peak` cd/m², with a D65-like colour cast
-/// that varies over the frame. Our choice: texture at the acuity blur's scale, a dynamic
-/// range of 20:1 across the frame.
+/// that varies over the frame. Our choice: texture at the acuity blur's scale; the
+/// gradient spans 20:1 (about 67:1 with the checker).
 pub fn frame(w: usize, h: usize, peak: f32) -> HdrImage {
     textured(w, h, |u, v| peak * (0.05 + 0.95 * u * v))
 }
