@@ -347,11 +347,7 @@ fn top_k_above_on<const K: usize>(
         || std::array::from_fn::<_, K, _>(|k| Brightest::new(keep, floor[k])),
         // One call per level, so that each is compiled inside its target-feature
         // function (the per-pixel `fill`, keys and maximum, vectorised at its width).
-        |range, top| match isa {
-            Isa::Avx512Fma => Isa::Avx512Fma.run(|| offer_range(range, fill, top)),
-            Isa::Avx2Fma => Isa::Avx2Fma.run(|| offer_range(range, fill, top)),
-            Isa::Baseline => offer_range(range, fill, top),
-        },
+        |range, top| crate::simd::at_level!(isa, offer_range(range, fill, top)),
         |a, b| {
             let mut b = b.into_iter();
             a.map(|a| a.merge(b.next().expect("K channels")))

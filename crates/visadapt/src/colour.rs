@@ -736,7 +736,10 @@ mod tests {
         for isa in crate::simd::Isa::all_available() {
             for len in [n, n - 1, n - 15, 17, 16, 15, 1, 0] {
                 let mut out = vec![0u8; 3 * len];
-                isa.run(|| enc.encode_rgb(&values[..len], &g[..len], &b[..len], &mut out));
+                crate::simd::at_level!(
+                    isa,
+                    enc.encode_rgb(&values[..len], &g[..len], &b[..len], &mut out)
+                );
                 for (i, px) in out.chunks_exact(3).enumerate() {
                     let want = [expected[i], expected[n - 1 - i], expected[(i + 1) % n]];
                     assert_eq!(px, want, "{isa:?}, row of {len}, pixel {i}: {}", values[i]);
@@ -765,7 +768,7 @@ mod tests {
                 for len in [n, n - 1, n - 15, 17, 16, 15, 1, 0] {
                     let mut out = vec![0u8; 6 * len];
                     let (r, g, b) = (&values[..len], &g[..len], &b[..len]);
-                    isa.run(|| lut.encode_rgb(r, g, b, big_endian, &mut out));
+                    crate::simd::at_level!(isa, lut.encode_rgb(r, g, b, big_endian, &mut out));
                     for (i, px) in out.chunks_exact(6).enumerate() {
                         let code = |k: usize| {
                             let c = [px[2 * k], px[2 * k + 1]];

@@ -1041,11 +1041,7 @@ fn map_row(
     scotopic: Option<&[f32]>,
     [r, g, b]: [&mut [f32]; 3],
 ) -> PixelStats {
-    match isa {
-        Isa::Avx512Fma => Isa::Avx512Fma.run(|| map_chunk(c, xyz, scotopic, r, g, b)),
-        Isa::Avx2Fma => Isa::Avx2Fma.run(|| map_chunk(c, xyz, scotopic, r, g, b)),
-        Isa::Baseline => map_chunk(c, xyz, scotopic, r, g, b),
-    }
+    crate::simd::at_level!(isa, map_chunk(c, xyz, scotopic, r, g, b))
 }
 
 #[inline(always)]

@@ -7,14 +7,54 @@
 //! needed.
 //!
 //! The kernels are ordinary safe, generic Rust (`#[inline(always)]`, loops over small
-//! fixed-size arrays that the compiler vectorises); [`Isa::run`] compiles a closure that
-//! calls them inside a function with the AVX2 and FMA target features enabled. The only
+//! fixed-size arrays that the compiler vectorises); [`at_level!`] compiles a closure that
+//! calls them inside a function with the level's target features enabled. The only
 //! `unsafe` of the crate is the call of that function, here, after checking that the
 //! processor has the features. Kernels take a `const FMA: bool` to use [`madd`] with a
 //! fused multiply-add only where the instruction exists (elsewhere `f32::mul_add` would
 //! be a slow library call); results of the two paths differ only in rounding, which the
 //! kernels' tests bound.
+//!
+//! The closures are marked `#[inline(always)]` (by the macros, [`at_level!`] and
+//! [`run_inlined!`], the only way the crate calls [`Isa::run`]). Without the mark, whether
+//! a closure is inlined into its target-feature function is up to the optimiser and to
+//! how the crate is split into code-generation units: with this workspace's release
+//! profile (one unit, thin LTO) it always was, but a crate depending on this one builds it
+//! with Cargo's default profile (16 units, no LTO), where the closures were compiled on
+//! their own, for the baseline, and every fused multiply-add became a call of the C
+//! library's `fmaf`: the 1080p acuity blur took 78 ms instead of 4.2 ms (criterion, the
+//! `operator` benchmarks built in a separate crate with the default profile, 2 cores).
 #![allow(unsafe_code)]
+
+/// `$body` compiled for the instruction-set level `$isa` (an [`Isa`] value chosen at run
+/// time): one `#[inline(always)]` closure per level, each inlined into its own
+/// target-feature function (a single closure run at all three levels would be compiled
+/// once, for the baseline). The long form gives each level its own expression, for
+/// kernels generic over the vector width or over fused multiply-adds.
+macro_rules! at_level {
+    ($isa:expr, $body:expr $(,)?) => {
+        $crate::simd::at_level!($isa, avx512: $body, avx2: $body, baseline: $body)
+    };
+    ($isa:expr, avx512: $a:expr, avx2: $b:expr, baseline: $c:expr $(,)?) => {
+        match $isa {
+            $crate::simd::Isa::Avx512Fma => $crate::simd::run_inlined!(Avx512Fma, $a),
+            $crate::simd::Isa::Avx2Fma => $crate::simd::run_inlined!(Avx2Fma, $b),
+            $crate::simd::Isa::Baseline => $c,
+        }
+    };
+}
+pub(crate) use at_level;
+
+/// `$body` compiled for the one level `Isa::$level`, in an `#[inline(always)]` closure.
+macro_rules! run_inlined {
+    ($level:ident, $body:expr) => {
+        $crate::simd::Isa::$level.run(
+            #[inline(always)]
+            || $body,
+        )
+    };
+}
+pub(crate) use run_inlined;
 
 /// An instruction-set level the kernels are compiled for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -72,8 +112,10 @@ impl Isa {
         }
     }
 
-    /// Run `f` compiled for this level. `f` should call `#[inline(always)]` kernels so
-    /// that they are compiled inside the target-feature function.
+    /// Run `f` compiled for this level. `f` should be an `#[inline(always)]` closure that
+    /// calls `#[inline(always)]` kernels, so that they are compiled inside the
+    /// target-feature function whatever the build profile: call it through [`at_level!`]
+    /// or [`run_inlined!`], which mark the closure.
     ///
     /// # Panics
     /// If the level is not supported by this processor.
@@ -153,7 +195,7 @@ mod tests {
     fn both_levels_compute_the_same_sum() {
         let v: Vec<f32> = (0..1000).map(|i| i as f32 * 0.5).collect();
         for isa in Isa::all_available() {
-            let s: f32 = isa.run(|| v.iter().sum());
+            let s: f32 = at_level!(isa, v.iter().sum());
             assert_eq!(s, 249_750.0, "{isa:?}");
         }
         assert_eq!(madd::<true>(2.0, 3.0, 1.0), 7.0);

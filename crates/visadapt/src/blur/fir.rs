@@ -13,7 +13,7 @@
 //! unique symmetric 3-tap kernel `[a, 1 − 2a, a]` with `2a = σ²`. The taps are all
 //! positive, so the output is a convex combination of input samples.
 
-use crate::simd::{Isa, madd};
+use crate::simd::madd;
 
 /// Radius of the kernel for `sigma`: at least 4σ, at least 1.
 pub(crate) fn radius(sigma: f64) -> usize {
@@ -337,7 +337,7 @@ fn column_tiles(
     macro_rules! radii {
         ($($r:literal)*) => {
             match half.len() - 1 {
-                $($r => Isa::Avx512Fma.run(|| {
+                $($r => crate::simd::run_inlined!(Avx512Fma, {
                     tiles::<$r>(half, ring, base, offsets, count, out, width, cols.start)
                 }),)*
                 _ => 0,

@@ -742,12 +742,15 @@ mod tests {
                         .map(|&v| std::array::from_fn(|l| (v * (1.0 + l as f64)) as f32))
                         .collect();
                     let fma = isa.fma();
-                    isa.run(|| match (prec, fma) {
-                        (Precision::F32, true) => filter_rows::<f32, true, _>(&d, &mut rows),
-                        (Precision::F32, false) => filter_rows::<f32, false, _>(&d, &mut rows),
-                        (Precision::F64, true) => filter_rows::<f64, true, _>(&d, &mut rows),
-                        (Precision::F64, false) => filter_rows::<f64, false, _>(&d, &mut rows),
-                    });
+                    crate::simd::at_level!(
+                        isa,
+                        match (prec, fma) {
+                            (Precision::F32, true) => filter_rows::<f32, true, _>(&d, &mut rows),
+                            (Precision::F32, false) => filter_rows::<f32, false, _>(&d, &mut rows),
+                            (Precision::F64, true) => filter_rows::<f64, true, _>(&d, &mut rows),
+                            (Precision::F64, false) => filter_rows::<f64, false, _>(&d, &mut rows),
+                        }
+                    );
                     let tol = if prec == Precision::F64 { 2e-6 } else { 1e-5 };
                     for (i, (r, w)) in rows.iter().zip(&want).enumerate() {
                         for (l, &v) in r.iter().enumerate() {

@@ -120,11 +120,12 @@ use crate::simd::Isa;
 /// Call the kernel `$f::<FMA>(args)` compiled for `$isa` (FMA exactly when AVX2/FMA).
 macro_rules! with_isa {
     ($isa:expr, $($f:ident)::+ ($($a:expr),* $(,)?)) => {
-        match $isa {
-            Isa::Avx512Fma => Isa::Avx512Fma.run(|| $($f)::+::<true>($($a),*)),
-            Isa::Avx2Fma => Isa::Avx2Fma.run(|| $($f)::+::<true>($($a),*)),
-            Isa::Baseline => $($f)::+::<false>($($a),*),
-        }
+        crate::simd::at_level!(
+            $isa,
+            avx512: $($f)::+::<true>($($a),*),
+            avx2: $($f)::+::<true>($($a),*),
+            baseline: $($f)::+::<false>($($a),*),
+        )
     };
 }
 
@@ -466,10 +467,13 @@ fn exact_pass_with<const P: usize, S: Default + Send>(
     }
     // One closure per level, so that each is compiled inside its target-feature function
     // (a closure called from two is compiled outside both).
-    let run = |seg| match isa {
-        Isa::Avx512Fma => Isa::Avx512Fma.run(|| segment!(true, fir::LANES_AVX512, seg)),
-        Isa::Avx2Fma => Isa::Avx2Fma.run(|| segment!(true, fir::LANES_AVX2, seg)),
-        Isa::Baseline => segment!(false, fir::LANES_BASELINE, seg),
+    let run = |seg| {
+        crate::simd::at_level!(
+            isa,
+            avx512: segment!(true, fir::LANES_AVX512, seg),
+            avx2: segment!(true, fir::LANES_AVX2, seg),
+            baseline: segment!(false, fir::LANES_BASELINE, seg),
+        )
     };
     match exec {
         #[cfg(feature = "rayon")]
@@ -617,10 +621,10 @@ fn iir_filter<R: AsMut<[f32]>>(d: &iir::Design, isa: Isa, prec: iir::Precision, 
     };
     match (isa, prec) {
         (Isa::Avx512Fma | Isa::Avx2Fma, Precision::F32) => {
-            Isa::Avx2Fma.run(|| filter_rows::<f32, true, R>(d, rows))
+            crate::simd::run_inlined!(Avx2Fma, filter_rows::<f32, true, R>(d, rows))
         }
         (Isa::Avx512Fma | Isa::Avx2Fma, Precision::F64) => {
-            Isa::Avx2Fma.run(|| filter_rows::<f64, true, R>(d, rows))
+            crate::simd::run_inlined!(Avx2Fma, filter_rows::<f64, true, R>(d, rows))
         }
         (Isa::Baseline, Precision::F32) => filter_rows::<f32, false, R>(d, rows),
         (Isa::Baseline, Precision::F64) => filter_rows::<f64, false, R>(d, rows),

@@ -9,18 +9,7 @@ use crate::{DisplayImage, Error, Result};
 use std::io::Write;
 use std::path::Path;
 
-/// `$body` compiled for the instruction-set level `$isa` ([`Isa::run`]), one closure per
-/// level so that each is compiled inside its target-feature function (a single closure
-/// run at a level chosen at run time is compiled once, for the baseline).
-macro_rules! at_level {
-    ($isa:expr, $body:expr) => {
-        match $isa {
-            Isa::Avx512Fma => Isa::Avx512Fma.run(|| $body),
-            Isa::Avx2Fma => Isa::Avx2Fma.run(|| $body),
-            Isa::Baseline => $body,
-        }
-    };
-}
+use crate::simd::at_level;
 
 mod bands;
 

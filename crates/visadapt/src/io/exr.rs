@@ -1266,15 +1266,9 @@ fn rgb_planes_to_xyz_parallel(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32]
 /// order, without fused multiply-adds, so the same results bit for bit, two to four times
 /// as many pixels per instruction as the baseline (SSE2) build.
 fn rgb_to_xyz(isa: Isa, m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut [f32]) {
-    // The closure is inlined into each level's target-feature function only when told
-    // to: called from the three levels' arms of `Isa::run`, it is otherwise compiled once,
-    // for the baseline (SSE2), and every level runs that. Results are the same bit for bit
-    // except NaN payloads: a vector build may take an addition's operands in the other
+    // Results are the same at every level bit for bit except NaN payloads: a vector build may take an addition's operands in the other
     // order, and IEEE 754 leaves open which NaN comes out (every NaN is still a NaN).
-    isa.run(
-        #[inline(always)]
-        || rgb_to_xyz_kernel(m, scale, r, g, b),
-    );
+    crate::simd::at_level!(isa, rgb_to_xyz_kernel(m, scale, r, g, b));
 }
 
 /// The loop of [`rgb_to_xyz`], inlined into each instruction set's build.

@@ -64,17 +64,12 @@
 
 /// `kernel(args)` compiled for the widest instruction set of the processor
 /// ([`crate::simd::Isa`]), for the per-pixel loops of local adaptation (`kernel` is an
-/// `#[inline(always)]` function; one closure per instruction set, as the blur's kernels are
-/// dispatched, so that each is inlined into its target-feature function). None of these
+/// `#[inline(always)]` function, dispatched by [`crate::simd::at_level!`]). None of these
 /// loops fuses a multiply-add, so every instruction set gives the same values, bit for
 /// bit (tested).
 macro_rules! widest {
     ($f:ident ( $($a:expr),* $(,)? )) => {
-        match crate::simd::Isa::detect() {
-            crate::simd::Isa::Avx512Fma => crate::simd::Isa::Avx512Fma.run(|| $f($($a),*)),
-            crate::simd::Isa::Avx2Fma => crate::simd::Isa::Avx2Fma.run(|| $f($($a),*)),
-            crate::simd::Isa::Baseline => $f($($a),*),
-        }
+        crate::simd::at_level!(crate::simd::Isa::detect(), $f($($a),*))
     };
 }
 

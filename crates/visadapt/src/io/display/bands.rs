@@ -14,7 +14,7 @@
 use super::PngCompression;
 use crate::DisplayImage;
 use crate::colour::{Srgb8, SrgbLut};
-use crate::simd::Isa;
+use crate::simd::{Isa, at_level};
 use zlib_rs::{Deflate, DeflateConfig, DeflateFlush, Strategy};
 
 /// The zlib header: CM = 8 (deflate), CINFO = 7 (32 KiB window), FLEVEL = 0 ("fastest"),
