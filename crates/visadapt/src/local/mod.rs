@@ -170,8 +170,22 @@ impl<const K: usize> Table<K> {
     /// read with `get`, always in range), so that loops over pixels vectorise (gathers).
     #[inline(always)]
     pub(crate) fn at(&self, offset: f32) -> [f32; K] {
-        let last = self.values.len().saturating_sub(2);
-        let top = last as f32 + 1.0;
+        let (i, t) = self.locate(offset);
+        // `i` is a whole number in `0..=last`, or NaN (→ 0).
+        let i = i as usize;
+        let a = self.values.get(i).copied().unwrap_or([0.0; K]);
+        let d = self.deltas.get(i).copied().unwrap_or([0.0; K]);
+        std::array::from_fn(|k| a[k] + t * d[k])
+    }
+
+    /// The node below `offset` (clamped to the table), as a whole `f32`, and the fraction
+    /// `t` of the way to the next one, as [`Table::at`] interpolates them. Kept in `f32`
+    /// so that a loop over lanes vectorises (Rust's saturating float-to-integer
+    /// conversion does not).
+    #[inline(always)]
+    fn locate(&self, offset: f32) -> (f32, f32) {
+        let last = self.values.len().saturating_sub(2) as f32;
+        let top = last + 1.0;
         let p = (offset - self.start) * TABLE_STEPS_PER_LOG_UNIT;
         // `clamp` without its assertion (NaN stays NaN, as with `clamp`).
         let p = if p < 0.0 {
@@ -181,11 +195,78 @@ impl<const K: usize> Table<K> {
         } else {
             p
         };
-        let i = ((p as u32) as usize).min(last);
-        let t = p - i as f32;
-        let a = self.values.get(i).copied().unwrap_or([0.0; K]);
-        let d = self.deltas.get(i).copied().unwrap_or([0.0; K]);
-        std::array::from_fn(|k| a[k] + t * d[k])
+        // `floor` for `0 ≤ p < 2²³` (far more nodes than a table has) in two exact
+        // additions and a select, so that it vectorises at every level (SSE2 has no
+        // rounding instruction). NaN stays NaN.
+        let round = (p + TWO_23) - TWO_23;
+        let i = if round > p { round - 1.0 } else { round };
+        let i = if i > last { last } else { i };
+        (i, p - i)
+    }
+
+    /// [`Table::at`] for `N` offsets at once into `out`, coefficient by coefficient
+    /// (`out[k][lane]`), when their nodes lie within [`LOOKUP_SPAN`] consecutive ones of
+    /// the table (else false, and `out` is left as it was).
+    /// The map's offsets are smooth, so neighbouring pixels have neighbouring nodes: then
+    /// the look-up is those rows of the table and a per-lane select, which vectorises,
+    /// where the general look-up is a gather of `K` values per pixel that the compiler
+    /// leaves scalar. Each value is `a + t·d` of the same `a`, `d` and `t` as
+    /// [`Table::at`]'s, so the same bit for bit.
+    #[inline(always)]
+    fn at_lanes<const N: usize>(&self, offsets: &[f32; N], out: &mut [[f32; N]; K]) -> bool {
+        let mut node = [0f32; N];
+        let mut t = [0f32; N];
+        for l in 0..N {
+            (node[l], t[l]) = self.locate(offsets[l]);
+        }
+        // The rows: the span from the lower of the end lanes' nodes (the lowest node of a
+        // monotonic block), moved inside the table. A NaN node (a NaN offset) fails the
+        // test below.
+        let span = LOOKUP_SPAN as f32;
+        let Some(highest) = self.values.len().checked_sub(LOOKUP_SPAN) else {
+            return false;
+        };
+        let first = if node[N - 1] < node[0] {
+            node[N - 1]
+        } else {
+            node[0]
+        };
+        let first = if first > 0.0 { first } else { 0.0 };
+        let first = if first < highest as f32 {
+            first
+        } else {
+            highest as f32
+        };
+        let mut step = [0f32; N];
+        let mut inside = true;
+        for l in 0..N {
+            step[l] = node[l] - first;
+            inside &= (step[l] >= 0.0) & (step[l] < span);
+        }
+        if !inside {
+            return false;
+        }
+        // A whole number in `0..=highest` (clamped above; NaN became 0).
+        let rows = first as usize..first as usize + LOOKUP_SPAN;
+        let (Some(a), Some(d)) = (self.values.get(rows.clone()), self.deltas.get(rows)) else {
+            return false;
+        };
+        for (k, out) in out.iter_mut().enumerate() {
+            let mut al = [a[0][k]; N];
+            let mut dl = [d[0][k]; N];
+            for w in 1..LOOKUP_SPAN {
+                let (aw, dw) = (a[w][k], d[w][k]);
+                for l in 0..N {
+                    let here = step[l] == w as f32;
+                    al[l] = if here { aw } else { al[l] };
+                    dl[l] = if here { dw } else { dl[l] };
+                }
+            }
+            for l in 0..N {
+                out[l] = al[l] + t[l] * dl[l];
+            }
+        }
+        true
     }
 }
 
@@ -414,8 +495,8 @@ fn acuity_blur(
 /// The local mapping of the pixels of `xyz` (and their `scotopic` samples and
 /// `[photopic, scotopic]` map offsets) into `r`, `g`, `b`, compiled for the widest
 /// instruction set of the processor (the same result on every one: no multiply-add is
-/// fused). The two table look-ups per pixel stay scalar: the compiler does not turn them
-/// into gathers here (README, local adaptation performance).
+/// fused). The table look-ups are vectorised where neighbouring pixels share their nodes
+/// ([`Table::at_lanes`]).
 fn map_chunk(
     mapping: &LocalMapping,
     xyz: [&[f32]; 3],
@@ -453,8 +534,25 @@ fn map_chunk_kernel(
     }
 }
 
+/// Pixels per block of [`map_pixels`]' table look-ups: one AVX-512 vector of `f32` (two
+/// AVX2 vectors, four SSE2 ones). Our choice.
+const LOOKUP_LANES: usize = 16;
+
+/// 2²³: adding and subtracting it rounds a non-negative `f32` below it to a whole number.
+const TWO_23: f32 = 8_388_608.0;
+
+/// Consecutive table nodes a block's pixels may use for [`Table::at_lanes`]: 8 nodes are
+/// 1/16 log unit ([`TABLE_STEPS_PER_LOG_UNIT`]), i.e. a gradient of up to 0.004 log units
+/// per pixel over a block of [`LOOKUP_LANES`]. Our choice (measured on the `local`
+/// benchmark's frame, whose offsets span four log units).
+const LOOKUP_SPAN: usize = 8;
+
 /// The pixels of [`map_chunk_kernel`], with the file's scotopic samples `s` when
 /// `FILE_SCOTOPIC` (else estimated from XYZ); adds to `[non-finite, negative, saturated]`.
+///
+/// Blocks of [`LOOKUP_LANES`] pixels whose table nodes lie within one of each other
+/// ([`Table::at_lanes`], nearly all of them: the map is smooth) are mapped as vectors;
+/// the others, and the last pixels, one at a time. Both give the same values.
 #[inline(always)]
 fn map_pixels<const FILE_SCOTOPIC: bool>(
     mapping: &LocalMapping,
@@ -464,37 +562,111 @@ fn map_pixels<const FILE_SCOTOPIC: bool>(
     [r, g, b]: [&mut [f32]; 3],
     counts: &mut [u32; 3],
 ) {
+    const N: usize = LOOKUP_LANES;
     let n = r.len();
     let (xs, ys, zs, dp, ds) = (&xs[..n], &ys[..n], &zs[..n], &dp[..n], &ds[..n]);
     let s = if FILE_SCOTOPIC { &s[..n] } else { s };
     let (g, b) = (&mut g[..n], &mut b[..n]);
-    let [mut non_finite, mut negative, mut saturated] = *counts;
     let saturation = if mapping.rod_saturation {
         ROD_SATURATION_SCOTOPIC_CD_M2
     } else {
         f32::INFINITY
     };
-    for j in 0..n {
-        let sj = if FILE_SCOTOPIC { s[j] } else { 0.0 };
-        let (finite, neg, v) = operator::sanitize([xs[j], ys[j], zs[j], sj]);
+    let mut total = *counts;
+    let blocks = n / N;
+    let mut cone = [[0f32; N]; 10];
+    let mut rod = [[0f32; N]; 2];
+    for block in 0..blocks {
+        let at = block * N..(block + 1) * N;
+        let lanes = |v: &[f32]| -> [f32; N] { v[at.clone()].try_into().expect("a block") };
+        let (dpb, dsb) = (lanes(dp), lanes(ds));
+        if !mapping.cone.at_lanes(&dpb, &mut cone) {
+            // The general look-up, one pixel at a time.
+            for (l, &d) in dpb.iter().enumerate() {
+                for (k, c) in mapping.cone.at(d).into_iter().enumerate() {
+                    cone[k][l] = c;
+                }
+            }
+        }
+        if !mapping.rod.at_lanes(&dsb, &mut rod) {
+            for (l, &d) in dsb.iter().enumerate() {
+                for (k, c) in mapping.rod.at(d).into_iter().enumerate() {
+                    rod[k][l] = c;
+                }
+            }
+        }
+        let (r, g, b) = (&mut r[at.clone()], &mut g[at.clone()], &mut b[at.clone()]);
+        let out: [&mut [f32; N]; 3] = [r, g, b].map(|o| o.try_into().expect("a block"));
+        let sv = if FILE_SCOTOPIC { lanes(s) } else { [0.0; N] };
+        let input = [lanes(xs), lanes(ys), lanes(zs), sv];
+        let flags = map_lanes::<FILE_SCOTOPIC, N>(mapping, saturation, &input, &cone, &rod, out);
+        for (t, f) in total.iter_mut().zip(flags) {
+            *t += f;
+        }
+    }
+    // The last pixels, in a block padded with zeros (whose outputs are dropped).
+    let rest = blocks * N..n;
+    if !rest.is_empty() {
+        let pad = |v: &[f32]| -> [f32; N] {
+            std::array::from_fn(|l| v.get(rest.start + l).copied().unwrap_or(0.0))
+        };
+        let dpp = pad(dp);
+        let dsp = pad(ds);
+        let cone: [[f32; 10]; N] = std::array::from_fn(|l| mapping.cone.at(dpp[l]));
+        let rod: [[f32; 2]; N] = std::array::from_fn(|l| mapping.rod.at(dsp[l]));
+        let cone = std::array::from_fn(|k| std::array::from_fn(|l| cone[l][k]));
+        let rod = std::array::from_fn(|k| std::array::from_fn(|l| rod[l][k]));
+        let sv = if FILE_SCOTOPIC { pad(s) } else { [0.0; N] };
+        let input = [pad(xs), pad(ys), pad(zs), sv];
+        let mut out = [[0f32; N]; 3];
+        let [ro, go, bo] = out.each_mut();
+        let flags =
+            map_lanes::<FILE_SCOTOPIC, N>(mapping, saturation, &input, &cone, &rod, [ro, go, bo]);
+        let m = rest.len();
+        for (t, f) in total.iter_mut().zip(flags) {
+            *t += f;
+        }
+        r[rest.clone()].copy_from_slice(&out[0][..m]);
+        g[rest.clone()].copy_from_slice(&out[1][..m]);
+        b[rest].copy_from_slice(&out[2][..m]);
+    }
+    *counts = total;
+}
+
+/// `N` pixels of [`map_pixels`] (`input`: X, Y, Z and the file's scotopic samples), with
+/// their cone coefficients `cone[k][lane]` and rod `[gain, offset][lane]`, lane by lane
+/// (so that it vectorises); returns how many were `[non-finite, negative, saturated]`.
+/// Zeros (padding) count as none of them.
+#[inline(always)]
+fn map_lanes<const FILE_SCOTOPIC: bool, const N: usize>(
+    mapping: &LocalMapping,
+    saturation: f32,
+    input: &[[f32; N]; 4],
+    cone: &[[f32; N]; 10],
+    rod: &[[f32; N]; 2],
+    [r, g, b]: [&mut [f32; N]; 3],
+) -> [u32; 3] {
+    let mut flags = [0u32; 3];
+    for l in 0..N {
+        let sj = if FILE_SCOTOPIC { input[3][l] } else { 0.0 };
+        let (finite, neg, v) = operator::sanitize([input[0][l], input[1][l], input[2][l], sj]);
         let (sat, [x, y, z, sv]) = operator::saturate(v, mapping.max_input);
-        non_finite += u32::from(!finite);
-        negative += u32::from(neg);
-        saturated += u32::from(sat);
+        flags[0] += u32::from(!finite);
+        flags[1] += u32::from(neg);
+        flags[2] += u32::from(sat);
         let v = if FILE_SCOTOPIC {
             sv
         } else {
             scotopic::from_xyz(x, y, z)
         };
-        let c = mapping.cone.at(dp[j]);
-        let [rod, rod_offset] = mapping.rod.at(ds[j]);
+        let c = |k: usize| cone[k][l];
         // The same expression, in the same order, as the global operator's pixel.
-        let grey = rod * v.min(saturation) + (c[9] + rod_offset);
-        r[j] = c[0] * x + c[1] * y + c[2] * z + grey;
-        g[j] = c[3] * x + c[4] * y + c[5] * z + grey;
-        b[j] = c[6] * x + c[7] * y + c[8] * z + grey;
+        let grey = rod[0][l] * v.min(saturation) + (c(9) + rod[1][l]);
+        r[l] = c(0) * x + c(1) * y + c(2) * z + grey;
+        g[l] = c(3) * x + c(4) * y + c(5) * z + grey;
+        b[l] = c(6) * x + c(7) * y + c(8) * z + grey;
     }
-    *counts = [non_finite, negative, saturated];
+    flags
 }
 
 /// Quantiles of a local adaptation level over the image.
@@ -600,6 +772,135 @@ mod tests {
         }
     }
 
+    /// [`Table::at_lanes`] gives [`Table::at`]'s values bit for bit wherever it applies,
+    /// and applies to every block of a slow ramp: lanes on one node, on two, spread over
+    /// the span, past the ends of the table, and with NaN (where it must decline).
+    #[test]
+    fn lane_look_ups_are_the_single_ones_bit_for_bit() {
+        let t = Table::<3>::new(-2.0, 1.5, |d| {
+            [10f64.powf(-d) as f32, d.cos() as f32, (0.3 * d) as f32]
+        });
+        let mut taken = 0;
+        let mut declined = 0;
+        // Slopes in table nodes per pixel: 0 (one node), 0.05, 0.4 (within the span of 8
+        // over 16 lanes), 2 (beyond it); starts inside and beyond both ends.
+        for slope in [0.0f32, 0.05, 0.4, 2.0, -0.4] {
+            for start in [-2.6f32, -1.99, -0.5, 0.0, 0.77, 1.49, 2.2] {
+                let offsets: [f32; 16] =
+                    std::array::from_fn(|l| start + slope * l as f32 / TABLE_STEPS_PER_LOG_UNIT);
+                let mut out = [[7f32; 16]; 3];
+                if t.at_lanes(&offsets, &mut out) {
+                    taken += 1;
+                    for (l, &d) in offsets.iter().enumerate() {
+                        let want = t.at(d);
+                        for k in 0..3 {
+                            assert_eq!(
+                                out[k][l].to_bits(),
+                                want[k].to_bits(),
+                                "{slope} {start} {l}"
+                            );
+                        }
+                    }
+                } else {
+                    declined += 1;
+                    assert_eq!(out, [[7f32; 16]; 3], "left as it was");
+                    assert!(slope.abs() > 0.5, "{slope} {start}");
+                }
+            }
+        }
+        // Declined: the four blocks of slope 2 (30 nodes) inside the table; the other
+        // three of that slope lie (nearly) all beyond an end, clamped onto a node or two.
+        assert_eq!((taken, declined), (31, 4));
+        let mut nan = [0.3f32; 16];
+        nan[5] = f32::NAN;
+        assert!(!t.at_lanes(&nan, &mut [[0f32; 16]; 3]));
+    }
+
+    /// The mapping pass (blocks through [`Table::at_lanes`] and the general look-up, and
+    /// the last pixels) gives the per-pixel loop's values and counts bit for bit, on
+    /// smooth offsets and on noise, with and without a scotopic plane, bad pixels and
+    /// NaN offsets included.
+    #[test]
+    fn mapping_pass_blocks_are_the_per_pixel_loop_bit_for_bit() {
+        let n = 16 * 40 + 11;
+        let mapping = test_mapping();
+        let mut seed = 5u32;
+        let mut noise = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let mut planes: Vec<Vec<f32>> = (0..4)
+            .map(|_| (0..n).map(|_| 10f32.powf(8.0 * noise() - 4.0)).collect())
+            .collect();
+        planes[0][3] = f32::NAN;
+        planes[1][40] = -2.0;
+        planes[2][n - 2] = 1e30;
+        // A slow ramp, a steep one, noise, and a NaN.
+        let mut dp: Vec<f32> = (0..n).map(|j| -3.0 + 0.0004 * j as f32).collect();
+        let mut ds: Vec<f32> = (0..n).map(|j| 1.0 - 0.01 * j as f32).collect();
+        for d in &mut dp[300..400] {
+            *d = 6.0 * noise() - 4.0;
+        }
+        dp[77] = f32::NAN;
+        ds[500] = f32::INFINITY;
+        for scotopic in [None, Some(planes[3].as_slice())] {
+            let xyz = [planes[0].as_slice(), &planes[1], &planes[2]];
+            let mut want = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+            let mut want_counts = [0u32; 3];
+            for j in 0..n {
+                let sj = scotopic.map_or(0.0, |s| s[j]);
+                let (finite, neg, v) = operator::sanitize([xyz[0][j], xyz[1][j], xyz[2][j], sj]);
+                let (sat, [x, y, z, sv]) = operator::saturate(v, mapping.max_input);
+                want_counts[0] += u32::from(!finite);
+                want_counts[1] += u32::from(neg);
+                want_counts[2] += u32::from(sat);
+                let v = if scotopic.is_some() {
+                    sv
+                } else {
+                    scotopic::from_xyz(x, y, z)
+                };
+                let c = mapping.cone.at(dp[j]);
+                let [rod, rod_offset] = mapping.rod.at(ds[j]);
+                let grey = rod * v.min(ROD_SATURATION_SCOTOPIC_CD_M2) + (c[9] + rod_offset);
+                want[0][j] = c[0] * x + c[1] * y + c[2] * z + grey;
+                want[1][j] = c[3] * x + c[4] * y + c[5] * z + grey;
+                want[2][j] = c[6] * x + c[7] * y + c[8] * z + grey;
+            }
+            let mut got = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+            let [r, g, b] = got.each_mut().map(|v| v.as_mut_slice());
+            let stats = map_chunk(&mapping, xyz, scotopic, [&dp, &ds], r, g, b);
+            let [non_finite, negative, saturated] = want_counts.map(|c| c as usize);
+            assert_eq!(
+                (stats.non_finite, stats.negative, stats.saturated),
+                (non_finite, negative, saturated)
+            );
+            for c in 0..3 {
+                for j in 0..n {
+                    let (a, b) = (got[c][j], want[c][j]);
+                    assert!(
+                        a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                        "{c} {j}: {a} {b}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Tables over offsets −4 to 2 with distinct coefficients, for the mapping tests.
+    fn test_mapping() -> LocalMapping {
+        LocalMapping {
+            cone: Table::new(-4.0, 2.0, |d| {
+                std::array::from_fn(|k| ((k as f64 + 1.0) * 0.1 * 10f64.powf(-0.7 * d)) as f32)
+            }),
+            rod: Table::new(-4.0, 2.0, |d| {
+                [(0.3 * 10f64.powf(-0.9 * d)) as f32, (0.01 * d) as f32]
+            }),
+            display_max_cd_m2: 100.0,
+            rod_saturation: true,
+            max_input: 1e6,
+        }
+    }
+
     /// The mapping pass compiled for the widest instruction set gives the baseline build's
     /// values bit for bit (with and without a scotopic plane, bad pixels included).
     #[test]
@@ -618,17 +919,7 @@ mod tests {
         planes[2][11] = 1e30;
         let dp: Vec<f32> = (0..n).map(|_| 6.0 * noise() - 4.0).collect();
         let ds: Vec<f32> = (0..n).map(|_| 6.0 * noise() - 4.0).collect();
-        let mapping = LocalMapping {
-            cone: Table::new(-4.0, 2.0, |d| {
-                std::array::from_fn(|k| ((k as f64 + 1.0) * 0.1 * 10f64.powf(-0.7 * d)) as f32)
-            }),
-            rod: Table::new(-4.0, 2.0, |d| {
-                [(0.3 * 10f64.powf(-0.9 * d)) as f32, (0.01 * d) as f32]
-            }),
-            display_max_cd_m2: 100.0,
-            rod_saturation: true,
-            max_input: 1e6,
-        };
+        let mapping = test_mapping();
         for scotopic in [None, Some(planes[3].as_slice())] {
             let xyz = [planes[0].as_slice(), &planes[1], &planes[2]];
             let mut want = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
