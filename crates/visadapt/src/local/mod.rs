@@ -824,17 +824,8 @@ mod tests {
     fn mapping_pass_blocks_are_the_per_pixel_loop_bit_for_bit() {
         let n = 16 * 40 + 11;
         let mapping = test_mapping();
-        let mut seed = 5u32;
-        let mut noise = || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1u32 << 24) as f32
-        };
-        let mut planes: Vec<Vec<f32>> = (0..4)
-            .map(|_| (0..n).map(|_| 10f32.powf(8.0 * noise() - 4.0)).collect())
-            .collect();
-        planes[0][3] = f32::NAN;
-        planes[1][40] = -2.0;
-        planes[2][n - 2] = 1e30;
+        let mut noise = noise(5);
+        let planes = test_planes(n, &mut noise);
         // A slow ramp, a steep one, noise, and a NaN.
         let mut dp: Vec<f32> = (0..n).map(|j| -3.0 + 0.0004 * j as f32).collect();
         let mut ds: Vec<f32> = (0..n).map(|j| 1.0 - 0.01 * j as f32).collect();
@@ -886,6 +877,26 @@ mod tests {
         }
     }
 
+    /// Uniform numbers in `[0, 1)` from `seed` (a linear congruential generator).
+    fn noise(mut seed: u32) -> impl FnMut() -> f32 {
+        move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        }
+    }
+
+    /// X, Y, Z and scotopic planes of `n` samples over eight log units, with a NaN, a
+    /// negative and a huge sample among the first dozen, for the mapping tests.
+    fn test_planes(n: usize, noise: &mut impl FnMut() -> f32) -> Vec<Vec<f32>> {
+        let mut planes: Vec<Vec<f32>> = (0..4)
+            .map(|_| (0..n).map(|_| 10f32.powf(8.0 * noise() - 4.0)).collect())
+            .collect();
+        planes[0][7] = f32::NAN;
+        planes[1][9] = -2.0;
+        planes[2][11] = 1e30;
+        planes
+    }
+
     /// Tables over offsets −4 to 2 with distinct coefficients, for the mapping tests.
     fn test_mapping() -> LocalMapping {
         LocalMapping {
@@ -906,17 +917,8 @@ mod tests {
     #[test]
     fn mapping_pass_is_the_same_on_every_instruction_set() {
         let n = 3000;
-        let mut seed = 21u32;
-        let mut noise = || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as f32 / (1u32 << 24) as f32
-        };
-        let mut planes: Vec<Vec<f32>> = (0..4)
-            .map(|_| (0..n).map(|_| 10f32.powf(8.0 * noise() - 4.0)).collect())
-            .collect();
-        planes[0][7] = f32::NAN;
-        planes[1][9] = -2.0;
-        planes[2][11] = 1e30;
+        let mut noise = noise(21);
+        let planes = test_planes(n, &mut noise);
         let dp: Vec<f32> = (0..n).map(|_| 6.0 * noise() - 4.0).collect();
         let ds: Vec<f32> = (0..n).map(|_| 6.0 * noise() - 4.0).collect();
         let mapping = test_mapping();
