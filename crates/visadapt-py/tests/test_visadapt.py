@@ -438,14 +438,14 @@ def test_adaptation_follows_the_time_course_and_ends_at_the_steady_state():
 
 def test_long_calls_release_the_gil():
     rng = np.random.default_rng(3)
-    image = visadapt.from_array(rng.uniform(0, 1000, (1500, 1500, 3)).astype(np.float32))
-    span = {}
+    image = visadapt.from_array(rng.uniform(0, 1000, (2000, 2000, 3)).astype(np.float32))
+    calls = []
 
     def work():
-        span["start"] = time.perf_counter()
         for _ in range(3):
+            start = time.perf_counter()
             visadapt.map(image, fov=20)
-        span["end"] = time.perf_counter()
+            calls.append((start, time.perf_counter()))
 
     ticks = []
     t = threading.Thread(target=work)
@@ -453,12 +453,16 @@ def test_long_calls_release_the_gil():
     while t.is_alive():
         ticks.append(time.perf_counter())
     t.join()
-    inside = [x for x in ticks if span["start"] <= x <= span["end"]]
-    duration = span["end"] - span["start"]
-    assert len(inside) > 100, f"{len(inside)} ticks while mapping for {duration:.3f} s"
-    # With the GIL held the main thread would stall for a whole call; it never does.
-    gaps = np.diff([span["start"], *inside, span["end"]])
-    assert gaps.max() < 0.5 * duration / 3, f"longest stall {gaps.max():.3f} s of {duration:.3f} s"
+    # With the GIL held, the main thread would not run at all during a call: no tick
+    # inside it, one gap as long as the call. Released, the main thread runs throughout,
+    # but for the scheduler's pauses (three busy threads on two cores: tens of
+    # milliseconds at most, under load), so each call's longest gap stays well short of
+    # the call (about 70 ms each here).
+    for start, end in calls:
+        inside = [x for x in ticks if start <= x <= end]
+        assert len(inside) > 100, f"{len(inside)} ticks during a call of {end - start:.3f} s"
+        gaps = np.diff([start, *inside, end])
+        assert gaps.max() < 0.8 * (end - start), f"longest stall {gaps.max():.3f} s of a {end - start:.3f} s call"
 
 
 def stub_tree():
