@@ -20,6 +20,7 @@
 //! gets that level's Gaussian exactly; one below [`MIN_BLUR_SIGMA_PX`] is not blurred, as in the global operator.
 
 use crate::operator::MIN_BLUR_SIGMA_PX;
+use std::sync::Mutex;
 
 /// Ratio of successive sigmas in the stack: `2^(1/3)` (see the module docs).
 pub const SIGMA_RATIO: f64 = 1.259_921_049_894_873_2;
@@ -145,22 +146,26 @@ pub fn varying_gaussian_blur(
     if levels.is_empty() {
         return;
     }
-    // One plane at a time: its unblurred copy and one blurred rectangle beside it (at most
-    // 8 bytes per pixel).
-    let mut scratch = Vec::new();
+    // One plane at a time: its unblurred copy, and the blurred rectangles of the regions
+    // being worked on (one per thread at most) beside it.
     for p in planes.iter_mut() {
         let range = value_range(p);
         let source = p.to_vec();
         // The unblurred part: pixels not blurred keep their values, the others start at 0.
         let min_sigma = min_blur_sigma_f32();
         widest!(clear_blurred(p, sigma_px, min_sigma));
+        // Each row behind a lock: the regions of one level cover disjoint pieces, so they
+        // are blurred and added in parallel, each row taking one level's sums in turn and
+        // the levels in their order (the same result as one region after the other).
+        let rows: Vec<Mutex<&mut [f32]>> = p.chunks_mut(width).map(Mutex::new).collect();
         for (j, &sigma) in levels.iter().enumerate() {
             let reach = crate::blur::reach_px(sigma, REGION_TOLERANCE / range);
-            for region in tiles.regions(j, reach) {
+            let regions = tiles.regions(j, reach);
+            let blur_region = |scratch: &mut Vec<f32>, region: &Region| {
                 let [x0, x1, y0, y1] = region.crop;
                 let cw = x1 - x0;
                 scratch.clear();
-                // Exactly the rectangle (no growth beyond it: at most one plane).
+                // Exactly the rectangle (no growth beyond it).
                 scratch.reserve_exact(cw * (y1 - y0));
                 for y in y0..y1 {
                     scratch.extend_from_slice(&source[y * width + x0..y * width + x1]);
@@ -172,7 +177,8 @@ pub fn varying_gaussian_blur(
                     sigma,
                 );
                 // Row by row (in parallel), each piece crossing the row.
-                let row = |y: usize, out: &mut [f32]| {
+                let row = |y: usize| {
+                    let mut out = rows[y].lock().unwrap_or_else(|e| e.into_inner());
                     for &[px0, px1, py0, py1] in &region.pieces {
                         if (py0..py1).contains(&y) {
                             let blurred = &scratch[(y - y0) * cw + px0 - x0..][..px1 - px0];
@@ -185,17 +191,24 @@ pub fn varying_gaussian_blur(
                     .pieces
                     .iter()
                     .fold((height, 0), |(a, b), r| (a.min(r[2]), b.max(r[3])));
-                let rows = &mut p[ry0 * width..ry1 * width];
                 #[cfg(feature = "rayon")]
                 {
                     use rayon::prelude::*;
-                    rows.par_chunks_mut(width)
-                        .enumerate()
-                        .for_each(|(k, out)| row(ry0 + k, out));
+                    (ry0..ry1).into_par_iter().for_each(row);
                 }
                 #[cfg(not(feature = "rayon"))]
-                for (k, out) in rows.chunks_mut(width).enumerate() {
-                    row(ry0 + k, out);
+                (ry0..ry1).for_each(row);
+            };
+            #[cfg(feature = "rayon")]
+            {
+                use rayon::prelude::*;
+                regions.par_iter().for_each_init(Vec::new, blur_region);
+            }
+            #[cfg(not(feature = "rayon"))]
+            {
+                let mut scratch = Vec::new();
+                for region in &regions {
+                    blur_region(&mut scratch, region);
                 }
             }
         }
