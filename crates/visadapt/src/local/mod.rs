@@ -204,6 +204,19 @@ impl<const K: usize> Table<K> {
         (i, p - i)
     }
 
+    /// [`Table::at`] for `N` offsets into `out` (`out[k][lane]`): [`Table::at_lanes`]
+    /// where it applies, else the general look-up one offset at a time.
+    #[inline(always)]
+    fn lanes_into<const N: usize>(&self, offsets: &[f32; N], out: &mut [[f32; N]; K]) {
+        if !self.at_lanes(offsets, out) {
+            for (l, &d) in offsets.iter().enumerate() {
+                for (k, c) in self.at(d).into_iter().enumerate() {
+                    out[k][l] = c;
+                }
+            }
+        }
+    }
+
     /// [`Table::at`] for `N` offsets at once into `out`, coefficient by coefficient
     /// (`out[k][lane]`), when their nodes lie within [`LOOKUP_SPAN`] consecutive ones of
     /// the table (else false, and `out` is left as it was).
@@ -550,9 +563,10 @@ const LOOKUP_SPAN: usize = 8;
 /// The pixels of [`map_chunk_kernel`], with the file's scotopic samples `s` when
 /// `FILE_SCOTOPIC` (else estimated from XYZ); adds to `[non-finite, negative, saturated]`.
 ///
-/// Blocks of [`LOOKUP_LANES`] pixels whose table nodes lie within one of each other
-/// ([`Table::at_lanes`], nearly all of them: the map is smooth) are mapped as vectors;
-/// the others, and the last pixels, one at a time. Both give the same values.
+/// Pixels are mapped in blocks of [`LOOKUP_LANES`] (the last one padded with zeros).
+/// A block whose table nodes lie within [`LOOKUP_SPAN`] consecutive ones (nearly all:
+/// the map is smooth) takes its coefficients as vectors ([`Table::at_lanes`]); the
+/// others, one pixel at a time. Both give the same values.
 #[inline(always)]
 fn map_pixels<const FILE_SCOTOPIC: bool>(
     mapping: &LocalMapping,
@@ -580,21 +594,8 @@ fn map_pixels<const FILE_SCOTOPIC: bool>(
         let at = block * N..(block + 1) * N;
         let lanes = |v: &[f32]| -> [f32; N] { v[at.clone()].try_into().expect("a block") };
         let (dpb, dsb) = (lanes(dp), lanes(ds));
-        if !mapping.cone.at_lanes(&dpb, &mut cone) {
-            // The general look-up, one pixel at a time.
-            for (l, &d) in dpb.iter().enumerate() {
-                for (k, c) in mapping.cone.at(d).into_iter().enumerate() {
-                    cone[k][l] = c;
-                }
-            }
-        }
-        if !mapping.rod.at_lanes(&dsb, &mut rod) {
-            for (l, &d) in dsb.iter().enumerate() {
-                for (k, c) in mapping.rod.at(d).into_iter().enumerate() {
-                    rod[k][l] = c;
-                }
-            }
-        }
+        mapping.cone.lanes_into(&dpb, &mut cone);
+        mapping.rod.lanes_into(&dsb, &mut rod);
         let (r, g, b) = (&mut r[at.clone()], &mut g[at.clone()], &mut b[at.clone()]);
         let out: [&mut [f32; N]; 3] = [r, g, b].map(|o| o.try_into().expect("a block"));
         let sv = if FILE_SCOTOPIC { lanes(s) } else { [0.0; N] };
@@ -610,12 +611,8 @@ fn map_pixels<const FILE_SCOTOPIC: bool>(
         let pad = |v: &[f32]| -> [f32; N] {
             std::array::from_fn(|l| v.get(rest.start + l).copied().unwrap_or(0.0))
         };
-        let dpp = pad(dp);
-        let dsp = pad(ds);
-        let cone: [[f32; 10]; N] = std::array::from_fn(|l| mapping.cone.at(dpp[l]));
-        let rod: [[f32; 2]; N] = std::array::from_fn(|l| mapping.rod.at(dsp[l]));
-        let cone = std::array::from_fn(|k| std::array::from_fn(|l| cone[l][k]));
-        let rod = std::array::from_fn(|k| std::array::from_fn(|l| rod[l][k]));
+        mapping.cone.lanes_into(&pad(dp), &mut cone);
+        mapping.rod.lanes_into(&pad(ds), &mut rod);
         let sv = if FILE_SCOTOPIC { pad(s) } else { [0.0; N] };
         let input = [pad(xs), pad(ys), pad(zs), sv];
         let mut out = [[0f32; N]; 3];
