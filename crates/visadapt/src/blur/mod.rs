@@ -380,6 +380,69 @@ pub(crate) fn exact_pass<const P: usize, S: Default + Send>(
     )
 }
 
+/// Some rows of the exact-kernel blur of `sigma_px` over a `width × height` plane, on the
+/// calling thread: rows `start..start + out.len() / width` of the blur are written to
+/// `out`, input row `y` (for the rows they reach, `start − r` to the end's `+ r`, the
+/// boundary replicated) being written by `fill(y, row)`. The rows equal those of
+/// [`gaussian_blur`] over the whole plane bit for bit (the same operations in the same
+/// order; tested), so a plane can be blurred band by band, or a level of the spatially
+/// varying blur ([`crate::local::acuity`]) only over the rows and columns it is used in.
+/// Requires [`uses_exact_kernel`].
+///
+/// # Panics
+/// If `out` is not whole rows inside the plane, or the blur is not the exact kernel's.
+pub(crate) fn exact_rows(
+    sigma_px: f32,
+    width: usize,
+    height: usize,
+    start: usize,
+    out: &mut [f32],
+    fill: impl Fn(usize, &mut [f32]),
+) {
+    assert!(
+        uses_exact_kernel(sigma_px, width, height),
+        "exact_rows: sigma {sigma_px} on {width}×{height} is not the exact kernel's"
+    );
+    assert!(
+        out.len() % width == 0 && start + out.len() / width <= height,
+        "exact_rows: {} samples from row {start} are not rows of {width}×{height}",
+        out.len()
+    );
+    if out.is_empty() {
+        return;
+    }
+    let sigma = effective_sigma(sigma_px).expect("a positive sigma");
+    let half = fir::half_kernel(sigma);
+    let half = &half[..];
+    let fill = |y: usize, _: [&[f32]; 1], [row]: [&mut [f32]; 1]| fill(y, row);
+    macro_rules! segment {
+        ($fma:literal, $lanes:expr) => {
+            fir::segment::<$fma, { $lanes }, 1, ()>(
+                half,
+                width,
+                height,
+                false,
+                fir::Segment {
+                    start,
+                    rows: [&mut *out],
+                    above: (0, [Vec::new()]),
+                    below: [Vec::new()],
+                },
+                &fill,
+                &|_, _| (),
+                &|(), ()| (),
+                (),
+            )
+        };
+    }
+    crate::simd::at_level!(
+        Isa::detect(),
+        avx512: segment!(true, fir::LANES_AVX512),
+        avx2: segment!(true, fir::LANES_AVX2),
+        baseline: segment!(false, fir::LANES_BASELINE),
+    )
+}
+
 /// Rows per segment of an exact pass, at least this many radii (each segment also
 /// reads a radius of rows beyond each end).
 const SEGMENT_MIN_RADII: usize = 8;
@@ -733,6 +796,41 @@ mod tests {
                 );
             }
             assert!(v.iter().all(|&x| x >= 0.0), "σ {sigma}: negative response");
+        }
+    }
+
+    /// Rows of the exact kernel's blur computed band by band ([`exact_rows`]) are the
+    /// whole-plane blur's bit for bit, for bands at the top, inside and at the bottom, of
+    /// one row or many, on a plane with a 10⁶:1 range.
+    #[test]
+    fn exact_rows_are_the_whole_plane_blur_bit_for_bit() {
+        let (w, h) = (83, 71);
+        let src: Vec<f32> = (0..w * h)
+            .map(|i| {
+                if (i * 7919) % 13 == 0 {
+                    1e6
+                } else {
+                    ((i * 37) % 101) as f32 / 100.0
+                }
+            })
+            .collect();
+        for sigma in [0.6f32, 1.3, 2.9, 4.6] {
+            assert!(uses_exact_kernel(sigma, w, h), "σ {sigma}");
+            let mut whole = src.clone();
+            gaussian_blur(&mut whole, w, h, sigma);
+            for (start, rows) in [(0, 1), (0, 17), (5, 1), (20, 33), (50, 21), (70, 1), (0, h)] {
+                let mut out = vec![f32::NAN; rows * w];
+                exact_rows(sigma, w, h, start, &mut out, |y, row| {
+                    row.copy_from_slice(&src[y * w..(y + 1) * w]);
+                });
+                for (k, (a, b)) in out.iter().zip(&whole[start * w..]).enumerate() {
+                    assert_eq!(
+                        a.to_bits(),
+                        b.to_bits(),
+                        "σ {sigma}, rows {start}+{rows}: sample {k}: {a} {b}"
+                    );
+                }
+            }
         }
     }
 

@@ -146,70 +146,164 @@ pub fn varying_gaussian_blur(
     if levels.is_empty() {
         return;
     }
-    // One plane at a time: its unblurred copy, and the blurred rectangles of the regions
-    // being worked on (one per thread at most) beside it.
+    // The levels of the exact kernel come first (the sigmas rise): they are blurred band
+    // by band; the recursive filter's, after them, region by region.
+    let exact = levels.partition_point(|&s| crate::blur::uses_exact_kernel(s, width, height));
+    let mut source = Vec::with_capacity(n);
     for p in planes.iter_mut() {
-        let range = value_range(p);
-        let source = p.to_vec();
+        source.clear();
+        source.extend_from_slice(p);
+        banded_levels(p, &source, width, sigma_px, &levels, exact, &tiles);
+        if exact < levels.len() {
+            region_levels(p, &source, width, height, sigma_px, &levels, exact, &tiles);
+        }
+    }
+}
+
+/// Rows per band of [`banded_levels`]: half a tile, so that a band's output, sigmas and
+/// blurred rows (3 × 240 KiB at 1920 columns) stay in a core's 1 MiB L2 cache while its
+/// levels are added, at the cost of the kernel's `2r` rows around each band blurred
+/// again (1.2× the rows at r = 3, the most common radius of the benchmark's frame).
+const BAND_ROWS: usize = TILE_PX / 2;
+
+/// The levels of the exact kernel (`levels[..exact]`, each under
+/// [`crate::blur::IIR_MIN_SIGMA_PX`]), blurred from `source` and added into `plane`,
+/// whose pixels not blurred keep their values and the others start at 0: in parallel over
+/// bands of [`BAND_ROWS`] rows, each blurring and adding its levels in their order, every
+/// level only over the band's rows and the runs of tiles that take it (with the kernel's
+/// radius of columns and rows around them, read from `source`). Each blurred sample is
+/// the whole-plane blur's bit for bit ([`crate::blur::exact_rows`]) and each pixel takes
+/// its levels in the same order, so the result is that of blurring each level over
+/// regions, one level after the other; but the band's rows of `plane` and `sigma_px`
+/// are read and written while they are in cache, not once per level.
+fn banded_levels(
+    plane: &mut [f32],
+    source: &[f32],
+    width: usize,
+    sigma_px: &[f32],
+    levels: &[f32],
+    exact: usize,
+    tiles: &Tiles,
+) {
+    let min_sigma = min_blur_sigma_f32();
+    let height = plane.len() / width;
+    let band = |buf: &mut Vec<f32>, (b, out): (usize, &mut [f32])| {
+        let y0 = b * BAND_ROWS;
+        let rows = out.len() / width;
+        let sig = &sigma_px[y0 * width..][..out.len()];
         // The unblurred part: pixels not blurred keep their values, the others start at 0.
-        let min_sigma = min_blur_sigma_f32();
-        widest!(clear_blurred(p, sigma_px, min_sigma));
-        // Each row behind a lock: the regions of one level cover disjoint pieces, so they
-        // are blurred and added in parallel, each row taking one level's sums in turn and
-        // the levels in their order (the same result as one region after the other).
-        let rows: Vec<Mutex<&mut [f32]>> = p.chunks_mut(width).map(Mutex::new).collect();
-        for (j, &sigma) in levels.iter().enumerate() {
-            let reach = crate::blur::reach_px(sigma, REGION_TOLERANCE / range);
-            let regions = tiles.regions(j, reach);
-            let blur_region = |scratch: &mut Vec<f32>, region: &Region| {
-                let [x0, x1, y0, y1] = region.crop;
-                let cw = x1 - x0;
-                scratch.clear();
-                // Exactly the rectangle (no growth beyond it).
-                scratch.reserve_exact(cw * (y1 - y0));
-                for y in y0..y1 {
-                    scratch.extend_from_slice(&source[y * width + x0..y * width + x1]);
+        widest!(clear_blurred(out, sig, min_sigma));
+        let ty = y0 / TILE_PX;
+        let Some((first, last)) = tiles.band_levels(ty) else {
+            return;
+        };
+        for j in first..(last + 1).min(exact) {
+            let r = crate::blur::reach_px(levels[j], 0.0);
+            for [x0, x1] in tiles.runs(ty, j, r) {
+                let (c0, c1) = (x0.saturating_sub(r), (x1 + r).min(width));
+                let cw = c1 - c0;
+                buf.clear();
+                buf.resize(cw * rows, 0.0);
+                crate::blur::exact_rows(levels[j], cw, height, y0, buf, |y, row| {
+                    row.copy_from_slice(&source[y * width + c0..][..cw]);
+                });
+                for (k, blurred) in buf.chunks_exact(cw).enumerate() {
+                    let at = k * width;
+                    accumulate(
+                        &mut out[at + x0..at + x1],
+                        &blurred[x0 - c0..x1 - c0],
+                        levels,
+                        j,
+                        &sig[at + x0..at + x1],
+                    );
                 }
-                crate::blur::gaussian_blur_planes(
-                    &mut [scratch.as_mut_slice()],
-                    cw,
-                    y1 - y0,
-                    sigma,
-                );
-                // Row by row (in parallel), each piece crossing the row.
-                let row = |y: usize| {
-                    let mut out = rows[y].lock().unwrap_or_else(|e| e.into_inner());
-                    for &[px0, px1, py0, py1] in &region.pieces {
-                        if (py0..py1).contains(&y) {
-                            let blurred = &scratch[(y - y0) * cw + px0 - x0..][..px1 - px0];
-                            let sig = &sigma_px[y * width + px0..y * width + px1];
-                            accumulate(&mut out[px0..px1], blurred, &levels, j, sig);
-                        }
+            }
+        }
+    };
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        plane
+            .par_chunks_mut(BAND_ROWS * width)
+            .enumerate()
+            .for_each_init(Vec::new, band);
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        let mut buf = Vec::new();
+        plane
+            .chunks_mut(BAND_ROWS * width)
+            .enumerate()
+            .for_each(|b| band(&mut buf, b));
+    }
+}
+
+/// The levels `levels[from..]` (of the recursive filter), blurred from `source` and
+/// added into `plane` after the levels below them: one level after the other, each
+/// blurred over the regions that take it ([`Tiles::regions`]) with the reach of
+/// [`REGION_TOLERANCE`], in parallel.
+#[allow(clippy::too_many_arguments)]
+fn region_levels(
+    plane: &mut [f32],
+    source: &[f32],
+    width: usize,
+    height: usize,
+    sigma_px: &[f32],
+    levels: &[f32],
+    from: usize,
+    tiles: &Tiles,
+) {
+    let range = value_range(source);
+    // Each row behind a lock: the regions of one level cover disjoint pieces, so they
+    // are blurred and added in parallel, each row taking one level's sums in turn and
+    // the levels in their order (the same result as one region after the other).
+    let rows: Vec<Mutex<&mut [f32]>> = plane.chunks_mut(width).map(Mutex::new).collect();
+    for (j, &sigma) in levels.iter().enumerate().skip(from) {
+        let reach = crate::blur::reach_px(sigma, REGION_TOLERANCE / range);
+        let regions = tiles.regions(j, reach);
+        let blur_region = |scratch: &mut Vec<f32>, region: &Region| {
+            let [x0, x1, y0, y1] = region.crop;
+            let cw = x1 - x0;
+            scratch.clear();
+            // Exactly the rectangle (no growth beyond it).
+            scratch.reserve_exact(cw * (y1 - y0));
+            for y in y0..y1 {
+                scratch.extend_from_slice(&source[y * width + x0..y * width + x1]);
+            }
+            crate::blur::gaussian_blur_planes(&mut [scratch.as_mut_slice()], cw, y1 - y0, sigma);
+            // Row by row (in parallel), each piece crossing the row.
+            let row = |y: usize| {
+                let mut out = rows[y].lock().unwrap_or_else(|e| e.into_inner());
+                for &[px0, px1, py0, py1] in &region.pieces {
+                    if (py0..py1).contains(&y) {
+                        let blurred = &scratch[(y - y0) * cw + px0 - x0..][..px1 - px0];
+                        let sig = &sigma_px[y * width + px0..y * width + px1];
+                        accumulate(&mut out[px0..px1], blurred, levels, j, sig);
                     }
-                };
-                let (ry0, ry1) = region
-                    .pieces
-                    .iter()
-                    .fold((height, 0), |(a, b), r| (a.min(r[2]), b.max(r[3])));
-                #[cfg(feature = "rayon")]
-                {
-                    use rayon::prelude::*;
-                    (ry0..ry1).into_par_iter().for_each(row);
                 }
-                #[cfg(not(feature = "rayon"))]
-                (ry0..ry1).for_each(row);
             };
+            let (ry0, ry1) = region
+                .pieces
+                .iter()
+                .fold((height, 0), |(a, b), r| (a.min(r[2]), b.max(r[3])));
             #[cfg(feature = "rayon")]
             {
                 use rayon::prelude::*;
-                regions.par_iter().for_each_init(Vec::new, blur_region);
+                (ry0..ry1).into_par_iter().for_each(row);
             }
             #[cfg(not(feature = "rayon"))]
-            {
-                let mut scratch = Vec::new();
-                for region in &regions {
-                    blur_region(&mut scratch, region);
-                }
+            (ry0..ry1).for_each(row);
+        };
+        #[cfg(feature = "rayon")]
+        {
+            use rayon::prelude::*;
+            regions.par_iter().for_each_init(Vec::new, blur_region);
+        }
+        #[cfg(not(feature = "rayon"))]
+        {
+            let mut scratch = Vec::new();
+            for region in &regions {
+                blur_region(&mut scratch, region);
             }
         }
     }
@@ -328,6 +422,38 @@ impl Tiles {
         levels
     }
 
+    /// The range of levels the tiles of band `ty` take (`None`: no pixel of the band is
+    /// blurred).
+    fn band_levels(&self, ty: usize) -> Option<(usize, usize)> {
+        self.levels[ty * self.across..][..self.across]
+            .iter()
+            .flatten()
+            .fold(None, |acc, &(a, b)| match acc {
+                None => Some((a, b)),
+                Some((lo, hi)) => Some((lo.min(a), hi.max(b))),
+            })
+    }
+
+    /// The columns `[x0, x1)` of the runs of tiles of band `ty` that take level `j`, two
+    /// runs joined when the blur's `reach` around them would overlap.
+    fn runs(&self, ty: usize, j: usize, reach: usize) -> Vec<[usize; 2]> {
+        let mut runs: Vec<[usize; 2]> = Vec::new();
+        for tx in 0..self.across {
+            let takes = self.levels[ty * self.across + tx].is_some_and(|(a, b)| a <= j && j <= b);
+            if !takes {
+                continue;
+            }
+            let (x0, x1) = (tx * TILE_PX, ((tx + 1) * TILE_PX).min(self.width));
+            match runs.last_mut() {
+                Some(last) if x0 <= last[1].saturating_add(reach.saturating_mul(2)) => {
+                    last[1] = x1;
+                }
+                _ => runs.push([x0, x1]),
+            }
+        }
+        runs
+    }
+
     /// The rectangles over which level `j` is blurred, for a blur reaching `reach` pixels:
     /// per band of tiles the runs of tiles that take the level (joined when their reaches
     /// overlap), gathered into one rectangle while that costs no more area than blurring
@@ -354,21 +480,10 @@ impl Tiles {
         let mut regions: Vec<Region> = Vec::new();
         for ty in 0..self.down {
             let (y0, y1) = (ty * TILE_PX, ((ty + 1) * TILE_PX).min(h));
-            let mut runs: Vec<Rect> = Vec::new();
-            for tx in 0..self.across {
-                let takes =
-                    self.levels[ty * self.across + tx].is_some_and(|(a, b)| a <= j && j <= b);
-                if !takes {
-                    continue;
-                }
-                let (x0, x1) = (tx * TILE_PX, ((tx + 1) * TILE_PX).min(w));
-                match runs.last_mut() {
-                    Some(last) if x0 <= last[1].saturating_add(reach.saturating_mul(2)) => {
-                        last[1] = x1;
-                    }
-                    _ => runs.push([x0, x1, y0, y1]),
-                }
-            }
+            let runs = self
+                .runs(ty, j, reach)
+                .into_iter()
+                .map(|[x0, x1]| [x0, x1, y0, y1]);
             for piece in runs {
                 let crop = grow(piece);
                 let joined = regions
