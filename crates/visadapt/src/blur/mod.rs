@@ -404,7 +404,7 @@ pub(crate) fn exact_rows(
         "exact_rows: sigma {sigma_px} on {width}×{height} is not the exact kernel's"
     );
     assert!(
-        out.len() % width == 0 && start + out.len() / width <= height,
+        out.len().is_multiple_of(width) && start + out.len() / width <= height,
         "exact_rows: {} samples from row {start} are not rows of {width}×{height}",
         out.len()
     );
