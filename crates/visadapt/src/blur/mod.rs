@@ -380,29 +380,37 @@ pub(crate) fn exact_pass<const P: usize, S: Default + Send>(
     )
 }
 
-/// Some rows of the exact-kernel blur of `sigma_px` over a `width × height` plane, on the
-/// calling thread: rows `start..start + out.len() / width` of the blur are written to
-/// `out`, input row `y` (for the rows they reach, `start − r` to the end's `+ r`, the
-/// boundary replicated) being written by `fill(y, row)`. The rows equal those of
-/// [`gaussian_blur`] over the whole plane bit for bit (the same operations in the same
-/// order; tested), so a plane can be blurred band by band, or a level of the spatially
-/// varying blur ([`crate::local::acuity`]) only over the rows and columns it is used in.
-/// Requires [`uses_exact_kernel`].
+/// The exact kernel of `sigma_px` from its centre outwards (`half[0..=r]`, `r` its radius),
+/// for [`exact_rows`]: computed once and reused for every band of a plane. `None` when
+/// the blur of `sigma_px` on a `width × height` plane is not the exact kernel's
+/// ([`uses_exact_kernel`]).
+pub(crate) fn exact_half_kernel(sigma_px: f32, width: usize, height: usize) -> Option<Vec<f32>> {
+    if !uses_exact_kernel(sigma_px, width, height) {
+        return None;
+    }
+    effective_sigma(sigma_px).map(fir::half_kernel)
+}
+
+/// Some rows of the exact-kernel blur of a `width × height` plane with the kernel `half`
+/// ([`exact_half_kernel`]), on the calling thread: rows `start..start + out.len() / width`
+/// of the blur are written to `out`, input row `y` (for the rows they reach, `start − r`
+/// to the end's `+ r`, the boundary replicated) being written by `fill(y, row)`. The rows
+/// equal those of [`gaussian_blur`] over the whole plane bit for bit (the same operations
+/// in the same order; tested), so a plane can be blurred band by band, or a level of the
+/// spatially varying blur ([`crate::local::acuity`]) only over the rows and columns it is
+/// used in.
 ///
 /// # Panics
-/// If `out` is not whole rows inside the plane, or the blur is not the exact kernel's.
+/// If `out` is not whole rows inside the plane, or `half` is empty.
 pub(crate) fn exact_rows(
-    sigma_px: f32,
+    half: &[f32],
     width: usize,
     height: usize,
     start: usize,
     out: &mut [f32],
     fill: impl Fn(usize, &mut [f32]),
 ) {
-    assert!(
-        uses_exact_kernel(sigma_px, width, height),
-        "exact_rows: sigma {sigma_px} on {width}×{height} is not the exact kernel's"
-    );
+    assert!(!half.is_empty(), "exact_rows: an empty kernel");
     assert!(
         out.len().is_multiple_of(width) && start + out.len() / width <= height,
         "exact_rows: {} samples from row {start} are not rows of {width}×{height}",
@@ -411,9 +419,6 @@ pub(crate) fn exact_rows(
     if out.is_empty() {
         return;
     }
-    let sigma = effective_sigma(sigma_px).expect("a positive sigma");
-    let half = fir::half_kernel(sigma);
-    let half = &half[..];
     let fill = |y: usize, _: [&[f32]; 1], [row]: [&mut [f32]; 1]| fill(y, row);
     macro_rules! segment {
         ($fma:literal, $lanes:expr) => {
@@ -815,12 +820,12 @@ mod tests {
             })
             .collect();
         for sigma in [0.6f32, 1.3, 2.9, 4.6] {
-            assert!(uses_exact_kernel(sigma, w, h), "σ {sigma}");
             let mut whole = src.clone();
             gaussian_blur(&mut whole, w, h, sigma);
+            let half = exact_half_kernel(sigma, w, h).expect("the exact kernel");
             for (start, rows) in [(0, 1), (0, 17), (5, 1), (20, 33), (50, 21), (70, 1), (0, h)] {
                 let mut out = vec![f32::NAN; rows * w];
-                exact_rows(sigma, w, h, start, &mut out, |y, row| {
+                exact_rows(&half, w, h, start, &mut out, |y, row| {
                     row.copy_from_slice(&src[y * w..(y + 1) * w]);
                 });
                 for (k, (a, b)) in out.iter().zip(&whole[start * w..]).enumerate() {

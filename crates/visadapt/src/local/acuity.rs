@@ -187,6 +187,11 @@ fn banded_levels(
 ) {
     let min_sigma = min_blur_sigma_f32();
     let height = plane.len() / width;
+    // Each level's kernel once, not once per band and run.
+    let kernels: Vec<Vec<f32>> = levels[..exact]
+        .iter()
+        .map(|&s| crate::blur::exact_half_kernel(s, width, height).expect("an exact level"))
+        .collect();
     let band = |buf: &mut Vec<f32>, (b, out): (usize, &mut [f32])| {
         let y0 = b * BAND_ROWS;
         let rows = out.len() / width;
@@ -197,14 +202,15 @@ fn banded_levels(
         let Some((first, last)) = tiles.band_levels(ty) else {
             return;
         };
-        for j in first..(last + 1).min(exact) {
-            let r = crate::blur::reach_px(levels[j], 0.0);
+        let end = (last + 1).min(exact);
+        for (j, half) in kernels.iter().enumerate().take(end).skip(first) {
+            let r = half.len() - 1;
             for [x0, x1] in tiles.runs(ty, j, r) {
                 let (c0, c1) = (x0.saturating_sub(r), (x1 + r).min(width));
                 let cw = c1 - c0;
                 buf.clear();
                 buf.resize(cw * rows, 0.0);
-                crate::blur::exact_rows(levels[j], cw, height, y0, buf, |y, row| {
+                crate::blur::exact_rows(half, cw, height, y0, buf, |y, row| {
                     row.copy_from_slice(&source[y * width + c0..][..cw]);
                 });
                 for (k, blurred) in buf.chunks_exact(cw).enumerate() {
