@@ -86,7 +86,7 @@ pub(crate) const LANES_AVX2: usize = 64;
 /// Samples computed together by the AVX-512 build: eight vectors of sixteen.
 pub(crate) const LANES_AVX512: usize = 128;
 /// The narrower block for what is left after the wide ones: one AVX2 vector.
-const NARROW: usize = 8;
+pub(super) const NARROW: usize = 8;
 
 /// One output sample: `h[0]·x(0) + Σ_j h[j]·(x(−j) + x(j))`, the same operations in the
 /// same order for rows and columns and for every block width, so that all round
@@ -412,7 +412,7 @@ fn tiles<const R: usize>(
 
 /// The ring and padded rows of a segment, kept by each thread from one pass to the next
 /// (fresh memory for every pass costs page faults: about 1 MiB per 1080p frame).
-struct Scratch(Vec<f32>);
+pub(super) struct Scratch(Vec<f32>);
 
 /// Output rows of a segment computed together down the ring, a block of columns at a
 /// time (see [`segment`]).
@@ -434,13 +434,13 @@ thread_local! {
 }
 
 impl Scratch {
-    fn take() -> Self {
+    pub(super) fn take() -> Self {
         Scratch(SCRATCH.with(std::cell::Cell::take))
     }
 
     /// Two buffers of `a` and `b` samples (their content is left from earlier use), the
     /// first starting on a multiple of [`ALIGN`] samples in memory.
-    fn split(&mut self, a: usize, b: usize) -> (&mut [f32], &mut [f32]) {
+    pub(super) fn split(&mut self, a: usize, b: usize) -> (&mut [f32], &mut [f32]) {
         self.0.resize(a + b + ALIGN, 0.0);
         let misalign = (self.0.as_ptr() as usize / size_of::<f32>()) % ALIGN;
         let skip = (ALIGN - misalign) % ALIGN;
@@ -448,7 +448,7 @@ impl Scratch {
         (a_buf, &mut b_buf[..b])
     }
 
-    fn give_back(self) {
+    pub(super) fn give_back(self) {
         if self.0.len() <= SCRATCH_KEEP_MAX {
             SCRATCH.with(|s| s.set(self.0));
         }

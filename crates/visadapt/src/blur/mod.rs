@@ -114,6 +114,9 @@
 
 mod fir;
 mod iir;
+mod multirate;
+
+pub use multirate::MULTIRATE_MIN_SIGMA_PX;
 
 use crate::simd::Isa;
 
@@ -220,7 +223,14 @@ pub fn reach_px(sigma_px: f32, tolerance: f64) -> usize {
         return 0;
     };
     if sigma < f64::from(IIR_MIN_SIGMA_PX) {
-        return fir::half_kernel(sigma).len() - 1;
+        // The half-rate stages reach further than the exact kernel (which a plane under
+        // two samples across runs instead).
+        let exact = fir::half_kernel(sigma).len() - 1;
+        return if sigma >= f64::from(MULTIRATE_MIN_SIGMA_PX) {
+            exact.max(multirate::Kernels::new(sigma).reach())
+        } else {
+            exact
+        };
     }
     if tolerance.is_nan() || tolerance <= 0.0 {
         return usize::MAX;
@@ -380,6 +390,15 @@ pub(crate) fn exact_pass<const P: usize, S: Default + Send>(
     )
 }
 
+/// Whether a blur of `sigma_px` over a `width × height` plane is the exact kernel at full
+/// rate (so [`exact_half_kernel`] gives its kernel): [`uses_exact_kernel`], below
+/// [`MULTIRATE_MIN_SIGMA_PX`] or on a plane under two samples across or down.
+pub(crate) fn uses_full_rate_kernel(sigma_px: f32, width: usize, height: usize) -> bool {
+    uses_exact_kernel(sigma_px, width, height)
+        && effective_sigma(sigma_px)
+            .is_some_and(|s| matches!(Finite::kind(s, width, height), FiniteKind::Exact))
+}
+
 /// The exact kernel of `sigma_px` from its centre outwards (`half[0..=r]`, `r` its radius),
 /// for [`exact_rows`]: computed once and reused for every band of a plane. `None` when
 /// the blur of `sigma_px` on a `width × height` plane is not the exact kernel's
@@ -388,7 +407,11 @@ pub(crate) fn exact_half_kernel(sigma_px: f32, width: usize, height: usize) -> O
     if !uses_exact_kernel(sigma_px, width, height) {
         return None;
     }
-    effective_sigma(sigma_px).map(fir::half_kernel)
+    let sigma = effective_sigma(sigma_px)?;
+    match Finite::new(sigma, width, height) {
+        Finite::Exact(half) => Some(half),
+        Finite::Multirate(_) => None,
+    }
 }
 
 /// Some rows of the exact-kernel blur of a `width × height` plane with the kernel `half`
@@ -448,6 +471,46 @@ pub(crate) fn exact_rows(
     )
 }
 
+/// The finite kernel of an [`exact_pass`]: the exact kernel at full rate, or from
+/// [`MULTIRATE_MIN_SIGMA_PX`] on (on planes at least two samples across and down) the
+/// two half-rate stages of `multirate`.
+enum Finite {
+    /// The exact kernel from its centre outwards.
+    Exact(Vec<f32>),
+    Multirate(multirate::Kernels),
+}
+
+/// Which [`Finite`] kernel a sigma takes on a plane.
+enum FiniteKind {
+    Exact,
+    Multirate,
+}
+
+impl Finite {
+    fn kind(sigma: f64, width: usize, height: usize) -> FiniteKind {
+        if sigma >= f64::from(MULTIRATE_MIN_SIGMA_PX) && width >= 2 && height >= 2 {
+            FiniteKind::Multirate
+        } else {
+            FiniteKind::Exact
+        }
+    }
+
+    fn new(sigma: f64, width: usize, height: usize) -> Self {
+        match Self::kind(sigma, width, height) {
+            FiniteKind::Multirate => Finite::Multirate(multirate::Kernels::new(sigma)),
+            FiniteKind::Exact => Finite::Exact(fir::half_kernel(sigma)),
+        }
+    }
+
+    /// Rows (and columns) an output sample reaches on each side.
+    fn reach(&self) -> usize {
+        match self {
+            Finite::Exact(half) => half.len() - 1,
+            Finite::Multirate(k) => k.reach(),
+        }
+    }
+}
+
 /// Rows per segment of an exact pass, at least this many radii (each segment also
 /// reads a radius of rows beyond each end).
 const SEGMENT_MIN_RADII: usize = 8;
@@ -472,9 +535,8 @@ fn exact_pass_with<const P: usize, S: Default + Send>(
     if width == 0 || height == 0 {
         return S::default();
     }
-    let half = fir::half_kernel(sigma);
-    let half = &half[..];
-    let r = half.len() - 1;
+    let kernel = Finite::new(sigma, width, height);
+    let r = kernel.reach();
     let w = width;
     // Two segments per thread, each of several radii of rows.
     let segments = match exec {
@@ -520,17 +582,30 @@ fn exact_pass_with<const P: usize, S: Default + Send>(
         .collect();
     macro_rules! segment {
         ($fma:literal, $lanes:expr, $seg:expr) => {
-            fir::segment::<$fma, { $lanes }, P, S>(
-                half,
-                width,
-                height,
-                in_place,
-                $seg,
-                &fill,
-                &finish,
-                &add,
-                S::default(),
-            )
+            match &kernel {
+                Finite::Exact(half) => fir::segment::<$fma, { $lanes }, P, S>(
+                    half,
+                    width,
+                    height,
+                    in_place,
+                    $seg,
+                    &fill,
+                    &finish,
+                    &add,
+                    S::default(),
+                ),
+                Finite::Multirate(k) => multirate::segment::<$fma, { $lanes }, P, S>(
+                    k,
+                    width,
+                    height,
+                    in_place,
+                    $seg,
+                    &fill,
+                    &finish,
+                    &add,
+                    S::default(),
+                ),
+            }
         };
     }
     // One closure per level, so that each is compiled inside its target-feature function
@@ -819,7 +894,7 @@ mod tests {
                 }
             })
             .collect();
-        for sigma in [0.6f32, 1.3, 2.9, 4.6] {
+        for sigma in [0.6f32, 1.3, 2.9, 3.49] {
             let mut whole = src.clone();
             gaussian_blur(&mut whole, w, h, sigma);
             let half = exact_half_kernel(sigma, w, h).expect("the exact kernel");
@@ -1351,6 +1426,22 @@ mod tests {
                             separable_reference::<false>(&src, w, h, s)
                         };
                         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        if !uses_full_rate_kernel(sigma, w, h) {
+                            // The half-rate stages: within their bound of the exact
+                            // kernel (module `multirate`), and the same bits whatever
+                            // the split into segments.
+                            let range = src.iter().fold(0f32, |m, &x| m.max(x));
+                            let worst = v
+                                .iter()
+                                .zip(&want)
+                                .map(|(a, b)| (a - b).abs())
+                                .fold(0f32, f32::max);
+                            assert!(worst <= 1e-4 * range, "{w}×{h} σ {sigma}: {worst}");
+                            let mut seq = src.clone();
+                            blur_with(Exec::Sequential, isa, &mut seq, w, h, sigma);
+                            assert_eq!(bits(&v), bits(&seq), "{w}×{h} σ {sigma} {isa:?}");
+                            continue;
+                        }
                         assert_eq!(bits(&v), bits(&want), "{w}×{h} σ {sigma} {isa:?} {exec:?}");
                     }
                 }

@@ -148,7 +148,7 @@ pub fn varying_gaussian_blur(
     }
     // The levels of the exact kernel come first (the sigmas rise): they are blurred band
     // by band; the recursive filter's, after them, region by region.
-    let exact = levels.partition_point(|&s| crate::blur::uses_exact_kernel(s, width, height));
+    let exact = levels.partition_point(|&s| crate::blur::uses_full_rate_kernel(s, width, height));
     let mut source = Vec::with_capacity(n);
     for p in planes.iter_mut() {
         source.clear();

@@ -1,0 +1,476 @@
+//! The Gaussian of middle sigmas in two half-resolution stages.
+//!
+//! A Gaussian of standard deviation `σ` is two Gaussians of `σ/√2` in turn. After the
+//! first, the signal holds almost nothing above a quarter of the sampling rate (the first
+//! stage's gain there is `exp(−π²σ²/16)`), so it is computed only at every other sample
+//! (along rows, then down columns), and the second stage, which reads those samples,
+//! produces every output sample from them: output `n` is `Σ_m b(n − 2m)·z(m)`, with the
+//! second kernel `b` sampled at the offsets of the output's phase and normalised per
+//! phase (unit gain on both). Per output sample this is the convolution with a mixed
+//! kernel `Σ_m b(n − 2m)·a(2m − k)`, whose difference from the Gaussian of `σ` is, by
+//! Poisson's summation formula over the spacing 2, at most `2·exp(−π²σ²/8)` of the local
+//! range: 5.5e-7 at [`MULTIRATE_MIN_SIGMA_PX`], 1e-10 at 4.38 px (the acuity sigma of a
+//! 4K frame at a 20° field). Both kernels are the exact module's (`fir::kernel`: positive
+//! taps, discrete variance exactly `σ²/2`, truncated at `4σ/√2`), so every output is a
+//! convex combination of input samples (no negative values, no ringing beside an HDR
+//! edge) and the variance is `σ²` per phase within 1e-4 (tested). The exact kernel is
+//! truncated at `4σ` instead, a tail of 6e-5 of the Gaussian; the two blurs differ by at
+//! most 8e-5 of the range of an image with a 1e6:1 highlight (tested within 1e-4).
+//!
+//! The cost: along a row, the first stage computes half the samples with a kernel of
+//! `⌈4σ/√2⌉` radius, the second every sample from half as many taps; down the columns
+//! the same on half as many columns. About 40 taps per pixel at σ = 4.38 px against the
+//! exact kernel's 74 (37 along each axis).
+//!
+//! It runs as the exact kernel does, as one pass over the rows with the stage before and
+//! after fused in ([`super::exact_pass`]): each input row is filtered along itself at
+//! half rate into a ring; every other row, the ring gives one half-resolution row into
+//! a second ring; each output row is filtered down that ring and then along itself to
+//! full rate. Each output sample goes through the same operations in the same order
+//! whatever the split into segments or the width of the vectors, and the half-rate grid
+//! sits on the image's even rows and columns, so the result does not depend on how the
+//! rows are split, and a rectangle of a plane whose corner is on an even row and column
+//! gives the plane's values wherever the blur's reach ([`Kernels::reach`]) stays inside
+//! it.
+
+use super::fir::{self, NARROW, Scratch, Segment};
+use crate::simd::madd;
+
+/// The smallest sigma, in pixels, blurred in two half-resolution stages (below it, the
+/// exact kernel at full rate): where the mixed kernel's worst difference from the
+/// Gaussian, `2·exp(−π²σ²/8)` of the local range, is 5.5e-7, under the
+/// `REGION_TOLERANCE`-scale errors the acuity stage accepts elsewhere (1e-6), and where
+/// the two stages' taps (about 30 per pixel) are fewer than the exact kernel's 58.
+pub const MULTIRATE_MIN_SIGMA_PX: f32 = 3.5;
+
+/// The two stages' kernels for one sigma.
+#[derive(Debug, Clone)]
+pub(crate) struct Kernels {
+    /// The first stage from its centre outwards, `a[0..=ra]`.
+    a: Vec<f32>,
+    /// The second stage at even offsets (0, ±2, ±4, …), normalised: `be[t]` weighs
+    /// `z(p − t)` and `z(p + t)` for output `2p`.
+    be: Vec<f32>,
+    /// The second stage at odd offsets (±1, ±3, …), normalised: `bo[t]` weighs
+    /// `z(p − t)` and `z(p + 1 + t)` for output `2p + 1`.
+    bo: Vec<f32>,
+}
+
+impl Kernels {
+    /// The kernels for `sigma` (positive, finite, below the recursive filter's range).
+    pub(crate) fn new(sigma: f64) -> Self {
+        let half = sigma / std::f64::consts::SQRT_2;
+        let a = fir::half_kernel(half);
+        let b: Vec<f64> = fir::kernel(half).iter().map(|&v| f64::from(v)).collect();
+        let rb = b.len() / 2;
+        let even: Vec<f64> = (0..=rb).step_by(2).map(|o| b[rb + o]).collect();
+        let odd: Vec<f64> = (1..=rb).step_by(2).map(|o| b[rb + o]).collect();
+        let sum_even = even[0] + 2.0 * even[1..].iter().sum::<f64>();
+        let sum_odd = 2.0 * odd.iter().sum::<f64>();
+        Kernels {
+            a,
+            be: even.iter().map(|v| (v / sum_even) as f32).collect(),
+            bo: odd.iter().map(|v| (v / sum_odd) as f32).collect(),
+        }
+    }
+
+    /// Radius of the first stage.
+    fn ra(&self) -> usize {
+        self.a.len() - 1
+    }
+
+    /// Half-rate samples each side of an output's own that the second stage reads.
+    fn mz(&self) -> usize {
+        (self.be.len() - 1).max(self.bo.len())
+    }
+
+    /// How far, in pixels, an output sample reaches along a row or a column (rounded up
+    /// to even, so that a rectangle grown by it from even coordinates starts on even
+    /// ones): `2·mz + ra + 1`.
+    pub(crate) fn reach(&self) -> usize {
+        (2 * self.mz() + self.ra() + 1).next_multiple_of(2)
+    }
+
+    /// Replicated samples each side of a row before it is split into even and odd
+    /// samples: at least the reach, even (so the split keeps the image's parity).
+    fn pad(&self) -> usize {
+        (2 * self.mz() + self.ra() + 2).next_multiple_of(2)
+    }
+}
+
+/// `N` outputs of a symmetric kernel about a sample: `t[0]·x(0) + Σ t[j]·(x(−j) + x(j))`,
+/// the operations of `fir::tap_sum`.
+#[inline(always)]
+fn centred<'a, const FMA: bool, const N: usize>(
+    t: &[f32],
+    x: impl Fn(isize) -> &'a [f32; N],
+) -> [f32; N] {
+    let c = x(0);
+    let mut acc: [f32; N] = std::array::from_fn(|l| t[0] * c[l]);
+    for (j, &h) in t.iter().enumerate().skip(1) {
+        let j = j as isize;
+        let (lo, hi) = (x(-j), x(j));
+        for l in 0..N {
+            acc[l] = madd::<FMA>(h, lo[l] + hi[l], acc[l]);
+        }
+    }
+    acc
+}
+
+/// `N` outputs of a symmetric kernel about a point between two samples:
+/// `t[0]·(x(0) + x(1)) + Σ t[j]·(x(−j) + x(1 + j))`.
+#[inline(always)]
+fn between<'a, const FMA: bool, const N: usize>(
+    t: &[f32],
+    x: impl Fn(isize) -> &'a [f32; N],
+) -> [f32; N] {
+    let (c0, c1) = (x(0), x(1));
+    let mut acc: [f32; N] = std::array::from_fn(|l| t[0] * (c0[l] + c1[l]));
+    for (j, &h) in t.iter().enumerate().skip(1) {
+        let j = j as isize;
+        let (lo, hi) = (x(-j), x(1 + j));
+        for l in 0..N {
+            acc[l] = madd::<FMA>(h, lo[l] + hi[l], acc[l]);
+        }
+    }
+    acc
+}
+
+#[inline(always)]
+fn lanes<const N: usize>(v: &[f32], at: usize) -> &[f32; N] {
+    v[at..at + N].try_into().expect("N samples")
+}
+
+/// `out[i]` for every `i`, a kernel `t` about sample `at(i, 0)` of `src` (`centre`) or
+/// between `at(i, 0)` and `at(i, 1)`, where `at(i, d)` is the index of the input at
+/// offset `d` (its lanes follow it for the outputs after `i`): in blocks of `L`, then
+/// [`NARROW`], then one, each output through the same operations.
+#[inline(always)]
+fn filter<const FMA: bool, const L: usize>(
+    t: &[f32],
+    centre: bool,
+    out: &mut [f32],
+    src: &[f32],
+    at: impl Fn(usize, isize) -> usize,
+) {
+    macro_rules! block {
+        ($n:expr, $i:expr) => {{
+            let i = $i;
+            if centre {
+                centred::<FMA, { $n }>(t, |d| lanes(src, at(i, d)))
+            } else {
+                between::<FMA, { $n }>(t, |d| lanes(src, at(i, d)))
+            }
+        }};
+    }
+    let n = out.len();
+    let mut i = 0;
+    while i + L <= n {
+        let acc = block!(L, i);
+        out[i..i + L].copy_from_slice(&acc);
+        i += L;
+    }
+    while i + NARROW <= n {
+        let acc = block!(NARROW, i);
+        out[i..i + NARROW].copy_from_slice(&acc);
+        i += NARROW;
+    }
+    while i < n {
+        let acc = block!(1, i);
+        out[i] = acc[0];
+        i += 1;
+    }
+}
+
+/// `e[i] = row[2i]`, `o[i] = row[2i + 1]`.
+#[inline(always)]
+fn deinterleave(row: &[f32], e: &mut [f32], o: &mut [f32]) {
+    let pairs = row.chunks_exact(2);
+    if let [last] = pairs.remainder() {
+        e[row.len() / 2] = *last;
+    }
+    for ((pair, e), o) in pairs.zip(e.iter_mut()).zip(o.iter_mut()) {
+        *e = pair[0];
+        *o = pair[1];
+    }
+}
+
+/// `out[2i] = e[i]`, `out[2i + 1] = o[i]`.
+#[inline(always)]
+fn interleave(e: &[f32], o: &[f32], out: &mut [f32]) {
+    let n = out.len();
+    let mut pairs = out.chunks_exact_mut(2);
+    for ((pair, &e), &o) in (&mut pairs).zip(e).zip(o) {
+        pair[0] = e;
+        pair[1] = o;
+    }
+    if let [last] = pairs.into_remainder() {
+        *last = e[n / 2];
+    }
+}
+
+/// Run one segment of a pass (see `fir::segment`, whose contract this keeps) with the
+/// two half-rate stages of `k`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
+    k: &Kernels,
+    width: usize,
+    height: usize,
+    in_place: bool,
+    mut seg: Segment<'_, P>,
+    fill: &impl Fn(usize, [&[f32]; P], [&mut [f32]; P]) -> S,
+    finish: &impl Fn(usize, [&mut [f32]; P]) -> S,
+    add: &impl Fn(S, S) -> S,
+    mut acc: S,
+) -> S {
+    let (w, h) = (width, height);
+    let (ra, mz) = (k.ra(), k.mz());
+    let pad = k.pad();
+    let padded = w + 2 * pad;
+    // Half-rate samples per row: m from −mz to (w − 1)/2 + mz, stored at m + mz.
+    let wz = (w - 1) / 2 + 2 * mz + 1;
+    // Even samples of a padded row, then its odd ones.
+    let evens = padded.div_ceil(2);
+    let stride = wz.next_multiple_of(16);
+    let ring_a = 2 * ra + 2;
+    let ring_z = 2 * mz + 3;
+    let a_row = seg.start;
+    let b_row = a_row + seg.rows[0].len() / w;
+    let mut scratch = Scratch::take();
+    let (rings, rest) = scratch.split(
+        P * (ring_a + ring_z) * stride,
+        P * padded + padded + stride + w,
+    );
+    let (ring1, ring2) = rings.split_at_mut(P * ring_a * stride);
+    let (pad_rows, rest) = rest.split_at_mut(P * padded);
+    let (eo, rest) = rest.split_at_mut(padded);
+    let (vrow, yrow) = rest.split_at_mut(stride);
+    let clamp = |y: isize| y.clamp(0, h as isize - 1) as usize;
+    let a_slot = |p: usize, y: usize| (p * ring_a + y % ring_a) * stride;
+    let zlo = (a_row / 2) as isize - mz as isize;
+    let zhi = ((b_row - 1) / 2 + mz) as isize;
+    let z_slot = |p: usize, m: isize| (p * ring_z + (m - zlo) as usize % ring_z) * stride;
+    let mut next_fill = clamp(2 * zlo - ra as isize);
+    let mut next_out = a_row;
+    let (te, to) = (k.be.len() - 1, k.bo.len());
+    for m in zlo..=zhi {
+        // The input rows this half-rate row reads, along themselves at half rate.
+        let last = clamp(2 * m + ra as isize);
+        while next_fill <= last {
+            let y = next_fill;
+            next_fill += 1;
+            let prior: [&[f32]; P] = std::array::from_fn(|p| {
+                if !in_place {
+                    &[][..]
+                } else if y < a_row {
+                    &seg.above.1[p][(y - seg.above.0) * w..][..w]
+                } else if y >= b_row {
+                    &seg.below[p][(y - b_row) * w..][..w]
+                } else {
+                    &seg.rows[p][(y - a_row) * w..][..w]
+                }
+            });
+            let mut parts = pad_rows.chunks_exact_mut(padded);
+            let rows: [&mut [f32]; P] = std::array::from_fn(|_| {
+                let part = parts.next().expect("P padded rows");
+                &mut part[pad..pad + w]
+            });
+            let s = fill(y, prior, rows);
+            if (a_row..b_row).contains(&y) {
+                acc = add(acc, s);
+            }
+            for (p, row) in pad_rows.chunks_exact_mut(padded).enumerate() {
+                let (first, end) = (row[pad], row[pad + w - 1]);
+                row[..pad].fill(first);
+                row[pad + w..].fill(end);
+                let (e, o) = eo.split_at_mut(evens);
+                deinterleave(row, e, o);
+                // z(m) at m + mz: its even samples from E(m + pad/2), odd from O.
+                let c0 = pad / 2 - mz;
+                let dst = &mut ring1[a_slot(p, y)..][..wz];
+                filter::<FMA, L>(&k.a, true, dst, eo, |i, d| {
+                    let base = if d % 2 == 0 { 0 } else { evens };
+                    base + (i + c0).wrapping_add_signed(d.div_euclid(2))
+                });
+            }
+        }
+        // Down the columns at half rate: row m of the half-rate grid.
+        for p in 0..P {
+            let (src, dst) = (&*ring1, &mut ring2[z_slot(p, m)..][..wz]);
+            filter::<FMA, L>(&k.a, true, dst, src, |i, d| a_slot(p, clamp(2 * m + d)) + i);
+        }
+        // Every output row whose half-rate rows are all here.
+        while next_out < b_row {
+            let n = next_out;
+            let pz = (n / 2) as isize;
+            let need = pz + if n.is_multiple_of(2) { te } else { to } as isize;
+            if need > m {
+                break;
+            }
+            next_out += 1;
+            let at = (n - a_row) * w;
+            for (p, plane) in seg.rows.iter_mut().enumerate() {
+                let (t, centre) = if n.is_multiple_of(2) {
+                    (&k.be, true)
+                } else {
+                    (&k.bo, false)
+                };
+                let v = &mut vrow[..wz];
+                filter::<FMA, L>(t, centre, v, ring2, |i, d| z_slot(p, pz + d) + i);
+                // Along the row to full rate: even outputs, then odd ones, interleaved.
+                let (ye, yo) = yrow[..w].split_at_mut(w.div_ceil(2));
+                filter::<FMA, L>(&k.be, true, ye, v, |i, d| (i + mz).wrapping_add_signed(d));
+                filter::<FMA, L>(&k.bo, false, yo, v, |i, d| (i + mz).wrapping_add_signed(d));
+                interleave(ye, yo, &mut plane[at..at + w]);
+            }
+            let out: [&mut [f32]; P] = seg.rows.each_mut().map(|p| &mut p[at..][..w]);
+            acc = add(acc, finish(n, out));
+        }
+    }
+    debug_assert_eq!(next_out, b_row, "every output row written");
+    scratch.give_back();
+    acc
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The two stages along one line in `f64`, written from their definition: `z(m) =
+    /// Σ_j a(j)·x(2m − j)`, `y(n) = Σ_m b_phase(n − 2m)·z(m)`, the boundary replicated.
+    fn line(x: &[f64], k: &Kernels) -> Vec<f64> {
+        let n = x.len() as isize;
+        let at = |i: isize| x[i.clamp(0, n - 1) as usize];
+        let a: Vec<f64> = k.a.iter().map(|&v| f64::from(v)).collect();
+        let ra = a.len() as isize - 1;
+        let z = |m: isize| -> f64 {
+            (-ra..=ra)
+                .map(|j| a[j.unsigned_abs()] * at(2 * m - j))
+                .sum()
+        };
+        (0..n)
+            .map(|i| {
+                let p = i.div_euclid(2);
+                if i % 2 == 0 {
+                    let t = k.be.len() as isize - 1;
+                    (-t..=t)
+                        .map(|d| f64::from(k.be[d.unsigned_abs()]) * z(p + d))
+                        .sum()
+                } else {
+                    (0..k.bo.len() as isize)
+                        .map(|t| f64::from(k.bo[t as usize]) * (z(p - t) + z(p + 1 + t)))
+                        .sum()
+                }
+            })
+            .collect()
+    }
+
+    /// The whole-plane reference: [`line`] along every row, then down every column.
+    fn reference(src: &[f32], w: usize, h: usize, sigma: f64) -> Vec<f64> {
+        let k = Kernels::new(sigma);
+        let mut rows: Vec<f64> = Vec::with_capacity(w * h);
+        for r in src.chunks_exact(w) {
+            let r: Vec<f64> = r.iter().map(|&v| f64::from(v)).collect();
+            rows.extend(line(&r, &k));
+        }
+        let mut out = vec![0.0; w * h];
+        for c in 0..w {
+            let col: Vec<f64> = (0..h).map(|y| rows[y * w + c]).collect();
+            for (y, v) in line(&col, &k).into_iter().enumerate() {
+                out[y * w + c] = v;
+            }
+        }
+        out
+    }
+
+    /// HDR noise with a 1e6:1 block.
+    fn noise(w: usize, h: usize) -> Vec<f32> {
+        let mut seed = 7u32;
+        (0..w * h)
+            .map(|i| {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let (x, y) = (i % w, i / w);
+                let block = (30..41).contains(&x) && (20..27).contains(&y);
+                if block {
+                    1e6
+                } else {
+                    (seed >> 8) as f32 / (1u32 << 24) as f32
+                }
+            })
+            .collect()
+    }
+
+    /// The pass computes the two stages as defined: against the `f64` reference, on even
+    /// and odd sizes, every instruction set, split into segments or not, within `f32`
+    /// rounding (4e-7 of the largest value).
+    #[test]
+    fn the_pass_is_the_two_stage_definition() {
+        use crate::blur::Exec;
+        use crate::simd::Isa;
+        for (w, h) in [(2, 2), (3, 5), (97, 64), (128, 131), (200, 37)] {
+            let src = noise(w, h);
+            let peak = src.iter().fold(0f32, |m, &v| m.max(v));
+            for sigma in [3.5f32, 4.38, 4.99] {
+                let want = reference(&src, w, h, f64::from(sigma));
+                for isa in Isa::all_available() {
+                    for exec in [Exec::Sequential, Exec::Parallel] {
+                        let mut got = src.clone();
+                        crate::blur::blur_with(exec, isa, &mut got, w, h, sigma);
+                        let worst = got
+                            .iter()
+                            .zip(&want)
+                            .map(|(&a, &b)| (f64::from(a) - b).abs())
+                            .fold(0f64, f64::max);
+                        assert!(
+                            worst <= 4e-7 * f64::from(peak),
+                            "{w}×{h} σ {sigma} {isa:?} {exec:?}: {worst:e}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// Each phase of the second stage has unit gain, and the mixed kernel's variance is
+    /// `σ²` (the first stage's `σ²/2` plus the second's, per phase) within 1e-4.
+    #[test]
+    fn phases_have_unit_gain_and_the_variance_is_sigma_squared() {
+        for sigma in [3.5f64, 4.0, 4.38, 4.99] {
+            let k = Kernels::new(sigma);
+            let even: f64 =
+                f64::from(k.be[0]) + 2.0 * k.be[1..].iter().map(|&v| f64::from(v)).sum::<f64>();
+            let odd: f64 = 2.0 * k.bo.iter().map(|&v| f64::from(v)).sum::<f64>();
+            assert!(
+                (even - 1.0).abs() < 1e-6 && (odd - 1.0).abs() < 1e-6,
+                "{even} {odd}"
+            );
+            let var_a: f64 =
+                k.a.iter()
+                    .enumerate()
+                    .map(|(j, &v)| {
+                        if j == 0 {
+                            0.0
+                        } else {
+                            2.0 * (j * j) as f64 * f64::from(v)
+                        }
+                    })
+                    .sum();
+            let var_even: f64 =
+                k.be.iter()
+                    .enumerate()
+                    .map(|(t, &v)| 2.0 * ((2 * t) * (2 * t)) as f64 * f64::from(v))
+                    .sum();
+            let var_odd: f64 =
+                k.bo.iter()
+                    .enumerate()
+                    .map(|(t, &v)| 2.0 * ((2 * t + 1) * (2 * t + 1)) as f64 * f64::from(v))
+                    .sum();
+            for var_b in [var_even, var_odd] {
+                let s = (var_a + var_b).sqrt();
+                assert!((s / sigma - 1.0).abs() < 1e-4, "σ {sigma}: {s}");
+            }
+            assert!(k.a.iter().chain(&k.be).chain(&k.bo).all(|&v| v > 0.0));
+        }
+    }
+}
