@@ -194,27 +194,57 @@ const COLUMN_BLOCK: usize = 128;
 /// `e[i] = row[2i]`, `o[i] = row[2i + 1]`.
 #[inline(always)]
 fn deinterleave(row: &[f32], e: &mut [f32], o: &mut [f32]) {
-    let pairs = row.chunks_exact(2);
-    if let [last] = pairs.remainder() {
-        e[row.len() / 2] = *last;
+    const N: usize = 16;
+    let n = row.len();
+    let blocks = n / (2 * N);
+    for ((src, e), o) in row
+        .chunks_exact(2 * N)
+        .zip(e.chunks_exact_mut(N))
+        .zip(o.chunks_exact_mut(N))
+    {
+        let src: &[f32; 2 * N] = src.try_into().expect("a block");
+        let (mut te, mut to) = ([0f32; N], [0f32; N]);
+        for i in 0..N {
+            te[i] = src[2 * i];
+            to[i] = src[2 * i + 1];
+        }
+        e.copy_from_slice(&te);
+        o.copy_from_slice(&to);
     }
-    for ((pair, e), o) in pairs.zip(e.iter_mut()).zip(o.iter_mut()) {
-        *e = pair[0];
-        *o = pair[1];
+    for (i, &v) in row.iter().enumerate().skip(blocks * 2 * N) {
+        if i % 2 == 0 {
+            e[i / 2] = v;
+        } else {
+            o[i / 2] = v;
+        }
     }
 }
 
 /// `out[2i] = e[i]`, `out[2i + 1] = o[i]`.
 #[inline(always)]
 fn interleave(e: &[f32], o: &[f32], out: &mut [f32]) {
+    const N: usize = 16;
     let n = out.len();
-    let mut pairs = out.chunks_exact_mut(2);
-    for ((pair, &e), &o) in (&mut pairs).zip(e).zip(o) {
-        pair[0] = e;
-        pair[1] = o;
+    // Whole blocks as arrays, so that the compiler interleaves them with shuffles.
+    let blocks = n / (2 * N);
+    for ((dst, e), o) in out
+        .chunks_exact_mut(2 * N)
+        .zip(e.chunks_exact(N))
+        .zip(o.chunks_exact(N))
+    {
+        let (e, o): (&[f32; N], &[f32; N]) = (
+            e.try_into().expect("a block"),
+            o.try_into().expect("a block"),
+        );
+        let mut t = [0f32; 2 * N];
+        for i in 0..N {
+            t[2 * i] = e[i];
+            t[2 * i + 1] = o[i];
+        }
+        dst.copy_from_slice(&t);
     }
-    if let [last] = pairs.into_remainder() {
-        *last = e[n / 2];
+    for i in blocks * 2 * N..n {
+        out[i] = if i % 2 == 0 { e[i / 2] } else { o[i / 2] };
     }
 }
 
@@ -263,6 +293,8 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
     let (te, to) = (k.be.len() - 1, k.bo.len());
     // The last half-rate row output row `n` reads.
     let need = |n: usize| (n / 2) as isize + if n.is_multiple_of(2) { te } else { to } as isize;
+    // Ring offsets of the rows each row of a group reads (see the passes down the rings).
+    let mut offs = vec![0usize; (Z_GROUP * (2 * ra + 1)).max(GROUP * (2 * mz + 2))];
     let mut next_fill = clamp(2 * zlo - ra as isize);
     let mut m = zlo;
     let mut next_out = a_row;
@@ -313,33 +345,55 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
             }
             // Down the columns at half rate, a block of columns at a time for the
             // group's rows (the block's input rows stay in the L1 cache).
+            // Where each of their input rows is in the ring (plane 0), centre at `ra`.
+            let rows_a = 2 * ra + 1;
+            for (g, mm) in (m..=m1).enumerate() {
+                for (j, o) in offs[g * rows_a..][..rows_a].iter_mut().enumerate() {
+                    *o = a_slot(0, clamp(2 * mm + j as isize - ra as isize));
+                }
+            }
             for p in 0..P {
+                let base = p * ring_a * stride;
                 for c0 in (0..wz).step_by(COLUMN_BLOCK) {
                     let c1 = (c0 + COLUMN_BLOCK).min(wz);
-                    for mm in m..=m1 {
+                    for (g, mm) in (m..=m1).enumerate() {
                         let dst = z_slot(p, mm) + c0;
                         let (src, dst) = (&*ring1, &mut ring2[dst..dst + c1 - c0]);
+                        let o = &offs[g * rows_a..][..rows_a];
                         filter::<FMA, L>(&k.a, true, dst, src, |i, d| {
-                            a_slot(p, clamp(2 * mm + d)) + c0 + i
+                            base + o[(d + ra as isize) as usize] + c0 + i
                         });
                     }
                 }
             }
             m = m1 + 1;
         }
+        // Where the half-rate rows of each output row are in the ring (plane 0), from
+        // `mz` before its own.
+        let rows_z = 2 * mz + 2;
+        for (g, n) in (n0..n1).enumerate() {
+            let first = (n / 2) as isize - mz as isize;
+            for (j, o) in offs[g * rows_z..][..rows_z].iter_mut().enumerate() {
+                // Rows past the segment's last half-rate row are never read.
+                *o = z_slot(0, (first + j as isize).min(zhi));
+            }
+        }
         for (p, plane) in seg.rows.iter_mut().enumerate() {
+            let base = p * ring_z * stride;
             // Down the columns to full rate, a block of columns for the group's rows.
             for c0 in (0..wz).step_by(COLUMN_BLOCK) {
                 let c1 = (c0 + COLUMN_BLOCK).min(wz);
                 for (g, n) in (n0..n1).enumerate() {
-                    let pz = (n / 2) as isize;
                     let (t, centre) = if n.is_multiple_of(2) {
                         (&k.be, true)
                     } else {
                         (&k.bo, false)
                     };
                     let v = &mut vrows[g * stride + c0..g * stride + c1];
-                    filter::<FMA, L>(t, centre, v, ring2, |i, d| z_slot(p, pz + d) + c0 + i);
+                    let o = &offs[g * rows_z..][..rows_z];
+                    filter::<FMA, L>(t, centre, v, ring2, |i, d| {
+                        base + o[(d + mz as isize) as usize] + c0 + i
+                    });
                 }
             }
             // Along each row to full rate: even outputs, then odd ones, interleaved.
