@@ -265,13 +265,15 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
 ) -> S {
     let (w, h) = (width, height);
     let (ra, mz) = (k.ra(), k.mz());
-    let pad = k.pad();
-    let padded = w + 2 * pad;
-    // Half-rate samples per row: m from −mz to (w − 1)/2 + mz, stored at m + mz.
+    // Half-rate samples per row: m from −mz to (w − 1)/2 + mz, stored at m + mz; the
+    // passes compute them up to a whole number of vectors (`stride`), so that no row
+    // ends in a scalar tail, from input padded far enough on the right.
     let wz = (w - 1) / 2 + 2 * mz + 1;
+    let stride = wz.next_multiple_of(16);
+    let pad = k.pad();
+    let padded = w + 2 * pad + 2 * (stride - wz);
     // Even samples of a padded row, then its odd ones.
     let evens = padded.div_ceil(2);
-    let stride = wz.next_multiple_of(16);
     let ring_a = 2 * ra + 2 * Z_GROUP + 1;
     let ring_z = 2 * mz + GROUP / 2 + Z_GROUP + 2;
     let a_row = seg.start;
@@ -336,7 +338,7 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
                     deinterleave(row, e, o);
                     // z(m) at m + mz: its even samples from E(m + pad/2), odd from O.
                     let c0 = pad / 2 - mz;
-                    let dst = &mut ring1[a_slot(p, y)..][..wz];
+                    let dst = &mut ring1[a_slot(p, y)..][..stride];
                     filter::<FMA, L>(&k.a, true, dst, eo, |i, d| {
                         let base = if d % 2 == 0 { 0 } else { evens };
                         base + (i + c0).wrapping_add_signed(d.div_euclid(2))
@@ -354,8 +356,8 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
             }
             for p in 0..P {
                 let base = p * ring_a * stride;
-                for c0 in (0..wz).step_by(COLUMN_BLOCK) {
-                    let c1 = (c0 + COLUMN_BLOCK).min(wz);
+                for c0 in (0..stride).step_by(COLUMN_BLOCK) {
+                    let c1 = (c0 + COLUMN_BLOCK).min(stride);
                     for (g, mm) in (m..=m1).enumerate() {
                         let dst = z_slot(p, mm) + c0;
                         let (src, dst) = (&*ring1, &mut ring2[dst..dst + c1 - c0]);
@@ -381,8 +383,8 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
         for (p, plane) in seg.rows.iter_mut().enumerate() {
             let base = p * ring_z * stride;
             // Down the columns to full rate, a block of columns for the group's rows.
-            for c0 in (0..wz).step_by(COLUMN_BLOCK) {
-                let c1 = (c0 + COLUMN_BLOCK).min(wz);
+            for c0 in (0..stride).step_by(COLUMN_BLOCK) {
+                let c1 = (c0 + COLUMN_BLOCK).min(stride);
                 for (g, n) in (n0..n1).enumerate() {
                     let (t, centre) = if n.is_multiple_of(2) {
                         (&k.be, true)
