@@ -104,7 +104,7 @@ pub(super) fn tap_sum<const FMA: bool>(half: &[f32], x: impl Fn(isize) -> f32) -
 /// [`tap_sum`] for `N` adjacent outputs at once; `x(d)` gives the `N` inputs at offset
 /// `d` from them.
 #[inline(always)]
-fn tap_sum_lanes<'a, const FMA: bool, const N: usize>(
+pub(super) fn tap_sum_lanes<'a, const FMA: bool, const N: usize>(
     half: &[f32],
     x: impl Fn(isize) -> &'a [f32; N],
 ) -> [f32; N] {
@@ -121,7 +121,7 @@ fn tap_sum_lanes<'a, const FMA: bool, const N: usize>(
 }
 
 #[inline(always)]
-fn lanes_at<const N: usize>(v: &[f32], at: usize) -> &[f32; N] {
+pub(super) fn lanes_at<const N: usize>(v: &[f32], at: usize) -> &[f32; N] {
     v[at..at + N].try_into().expect("N samples")
 }
 
@@ -164,6 +164,53 @@ pub(crate) struct Segment<'a, const P: usize> {
     pub(crate) above: (usize, [Vec<f32>; P]),
     /// In place: the input rows below the segment that its kernel reaches, per plane.
     pub(crate) below: [Vec<f32>; P],
+}
+
+impl<const P: usize> Segment<'_, P> {
+    /// Input row `y` of every plane, written by `fill(y, prior, rows)` into `pad_rows`
+    /// (one padded row of `padded` samples per plane, the row itself from sample `left`),
+    /// then its first and last samples replicated into the padding on each side. `prior`
+    /// is row `y`'s content before the pass when `in_place` (from the segment's rows or
+    /// the rows saved above and below it), empty slices otherwise. Returns what `fill`
+    /// returned.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub(crate) fn fill_padded<S>(
+        &self,
+        y: usize,
+        width: usize,
+        in_place: bool,
+        pad_rows: &mut [f32],
+        padded: usize,
+        left: usize,
+        fill: &impl Fn(usize, [&[f32]; P], [&mut [f32]; P]) -> S,
+    ) -> S {
+        let (a, w) = (self.start, width);
+        let b = a + self.rows[0].len() / w;
+        let prior: [&[f32]; P] = std::array::from_fn(|p| {
+            if !in_place {
+                &[][..]
+            } else if y < a {
+                &self.above.1[p][(y - self.above.0) * w..][..w]
+            } else if y >= b {
+                &self.below[p][(y - b) * w..][..w]
+            } else {
+                &self.rows[p][(y - a) * w..][..w]
+            }
+        });
+        let mut parts = pad_rows.chunks_exact_mut(padded);
+        let rows: [&mut [f32]; P] = std::array::from_fn(|_| {
+            let part = parts.next().expect("P padded rows");
+            &mut part[left..left + w]
+        });
+        let s = fill(y, prior, rows);
+        for row in pad_rows.chunks_exact_mut(padded).take(P) {
+            let (first, last) = (row[left], row[left + w - 1]);
+            row[..left].fill(first);
+            row[left + w..].fill(last);
+        }
+        s
+    }
 }
 
 /// Run one segment of an exact pass: every input row its outputs need (the segment's
@@ -215,23 +262,7 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
         while next <= (o + count - 1 + r).min(height - 1) {
             let y = next;
             next += 1;
-            let prior: [&[f32]; P] = std::array::from_fn(|p| {
-                if !in_place {
-                    &[][..]
-                } else if y < a {
-                    &seg.above.1[p][(y - seg.above.0) * w..][..w]
-                } else if y >= b {
-                    &seg.below[p][(y - b) * w..][..w]
-                } else {
-                    &seg.rows[p][(y - a) * w..][..w]
-                }
-            });
-            let mut parts = pad.chunks_exact_mut(padded);
-            let rows: [&mut [f32]; P] = std::array::from_fn(|_| {
-                let part = parts.next().expect("P padded rows");
-                &mut part[r..r + w]
-            });
-            let s = fill(y, prior, rows);
+            let s = seg.fill_padded(y, w, in_place, pad, padded, r, fill);
             if (a..b).contains(&y) {
                 acc = add(acc, s);
             }
@@ -239,9 +270,6 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
             for (p, row) in pad.chunks_exact_mut(padded).enumerate() {
                 let dst = &mut ring[(p * m + slot) * stride..][..w];
                 if w > 1 {
-                    let (first, last) = (row[r], row[r + w - 1]);
-                    row[..r].fill(first);
-                    row[r + w..].fill(last);
                     convolve::<FMA, L>(half, dst, |i, d| (i + r).wrapping_add_signed(d), row);
                 } else {
                     dst.copy_from_slice(&row[r..r + w]);

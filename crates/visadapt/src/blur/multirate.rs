@@ -98,25 +98,6 @@ impl Kernels {
     }
 }
 
-/// `N` outputs of a symmetric kernel about a sample: `t[0]·x(0) + Σ t[j]·(x(−j) + x(j))`,
-/// the operations of `fir::tap_sum`.
-#[inline(always)]
-fn centred<'a, const FMA: bool, const N: usize>(
-    t: &[f32],
-    x: impl Fn(isize) -> &'a [f32; N],
-) -> [f32; N] {
-    let c = x(0);
-    let mut acc: [f32; N] = std::array::from_fn(|l| t[0] * c[l]);
-    for (j, &h) in t.iter().enumerate().skip(1) {
-        let j = j as isize;
-        let (lo, hi) = (x(-j), x(j));
-        for l in 0..N {
-            acc[l] = madd::<FMA>(h, lo[l] + hi[l], acc[l]);
-        }
-    }
-    acc
-}
-
 /// `N` outputs of a symmetric kernel about a point between two samples:
 /// `t[0]·(x(0) + x(1)) + Σ t[j]·(x(−j) + x(1 + j))`.
 #[inline(always)]
@@ -136,11 +117,6 @@ fn between<'a, const FMA: bool, const N: usize>(
     acc
 }
 
-#[inline(always)]
-fn lanes<const N: usize>(v: &[f32], at: usize) -> &[f32; N] {
-    v[at..at + N].try_into().expect("N samples")
-}
-
 /// `out[i]` for every `i`, a kernel `t` about sample `at(i, 0)` of `src` (`centre`) or
 /// between `at(i, 0)` and `at(i, 1)`, where `at(i, d)` is the index of the input at
 /// offset `d` (its lanes follow it for the outputs after `i`): in blocks of `L`, then
@@ -157,9 +133,9 @@ fn filter<const FMA: bool, const L: usize>(
         ($n:expr, $i:expr) => {{
             let i = $i;
             if centre {
-                centred::<FMA, { $n }>(t, |d| lanes(src, at(i, d)))
+                fir::tap_sum_lanes::<FMA, { $n }>(t, |d| fir::lanes_at(src, at(i, d)))
             } else {
-                between::<FMA, { $n }>(t, |d| lanes(src, at(i, d)))
+                between::<FMA, { $n }>(t, |d| fir::lanes_at(src, at(i, d)))
             }
         }};
     }
@@ -310,30 +286,11 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
             while next_fill <= last {
                 let y = next_fill;
                 next_fill += 1;
-                let prior: [&[f32]; P] = std::array::from_fn(|p| {
-                    if !in_place {
-                        &[][..]
-                    } else if y < a_row {
-                        &seg.above.1[p][(y - seg.above.0) * w..][..w]
-                    } else if y >= b_row {
-                        &seg.below[p][(y - b_row) * w..][..w]
-                    } else {
-                        &seg.rows[p][(y - a_row) * w..][..w]
-                    }
-                });
-                let mut parts = pad_rows.chunks_exact_mut(padded);
-                let rows: [&mut [f32]; P] = std::array::from_fn(|_| {
-                    let part = parts.next().expect("P padded rows");
-                    &mut part[pad..pad + w]
-                });
-                let s = fill(y, prior, rows);
+                let s = seg.fill_padded(y, w, in_place, pad_rows, padded, pad, fill);
                 if (a_row..b_row).contains(&y) {
                     acc = add(acc, s);
                 }
                 for (p, row) in pad_rows.chunks_exact_mut(padded).enumerate() {
-                    let (first, end) = (row[pad], row[pad + w - 1]);
-                    row[..pad].fill(first);
-                    row[pad + w..].fill(end);
                     let (e, o) = eo.split_at_mut(evens);
                     deinterleave(row, e, o);
                     // z(m) at m + mz: its even samples from E(m + pad/2), odd from O.
