@@ -219,9 +219,12 @@ pub fn gaussian_blur_planes(planes: &mut [&mut [f32]], width: usize, height: usi
 /// (largest minus smallest sample) of the plane. For a spatially restricted blur (see
 /// [`crate::local::acuity`]).
 ///
-/// Below [`IIR_MIN_SIGMA_PX`] the kernel is finite and this is its radius, whatever the
+/// Below [`IIR_MIN_SIGMA_PX`] the kernel is finite and this is its reach, whatever the
 /// tolerance: the rectangle's values are the plane's bit for bit (the kernel's operations
-/// do not depend on the position in the row). From it on, the recursive filter's step
+/// do not depend on the position in the row). From [`MULTIRATE_MIN_SIGMA_PX`] on, the
+/// half-rate stages' grid lies on the even rows and columns, so this holds for a
+/// rectangle whose corner is on an even row and column (the reach is then even, so a
+/// rectangle grown by it from even coordinates, or clipped at the plane's edge, is one). From it on, the recursive filter's step
 /// response beyond a distance `d` is below `3·e^(−1.7·d/σ)` (measured from 2σ to 20σ for
 /// σ = 3 to 30, tested from 5 to 100: the step response is 3.3e-2 at 2σ, 1.5e-7 at 8σ, 1.1e-16 at 20σ, and
 /// decays faster as σ grows; tested), and a replicated edge replaces at most the range on
@@ -348,8 +351,8 @@ fn blur_fir(exec: Exec, isa: Isa, plane: &mut [f32], width: usize, height: usize
     );
 }
 
-/// Whether a blur of `sigma_px` over a `width × height` plane is done by the exact kernel
-/// (and so can be run by [`exact_pass`]).
+/// Whether a blur of `sigma_px` over a `width × height` plane is done by a finite kernel,
+/// the exact one at full rate or at half rate (and so can be run by [`exact_pass`]).
 pub(crate) fn uses_exact_kernel(sigma_px: f32, width: usize, height: usize) -> bool {
     width.checked_mul(height).is_some_and(|n| n > 0)
         && effective_sigma(sigma_px).is_some_and(|s| s < f64::from(IIR_MIN_SIGMA_PX))
@@ -411,8 +414,8 @@ pub(crate) fn uses_full_rate_kernel(sigma_px: f32, width: usize, height: usize) 
 
 /// The exact kernel of `sigma_px` from its centre outwards (`half[0..=r]`, `r` its radius),
 /// for [`exact_rows`]: computed once and reused for every band of a plane. `None` when
-/// the blur of `sigma_px` on a `width × height` plane is not the exact kernel's
-/// ([`uses_exact_kernel`]).
+/// the blur of `sigma_px` on a `width × height` plane is not the exact kernel at full
+/// rate ([`uses_full_rate_kernel`]).
 pub(crate) fn exact_half_kernel(sigma_px: f32, width: usize, height: usize) -> Option<Vec<f32>> {
     if !uses_exact_kernel(sigma_px, width, height) {
         return None;

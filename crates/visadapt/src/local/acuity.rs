@@ -146,8 +146,9 @@ pub fn varying_gaussian_blur(
     if levels.is_empty() {
         return;
     }
-    // The levels of the exact kernel come first (the sigmas rise): they are blurred band
-    // by band; the recursive filter's, after them, region by region.
+    // The levels of the exact kernel at full rate come first (the sigmas rise): they are
+    // blurred band by band; those of the half-rate stages and of the recursive filter,
+    // after them, region by region.
     let exact = levels.partition_point(|&s| crate::blur::uses_full_rate_kernel(s, width, height));
     let mut source = Vec::with_capacity(n);
     for p in planes.iter_mut() {
@@ -166,8 +167,8 @@ pub fn varying_gaussian_blur(
 /// again (1.2× the rows at r = 3, the most common radius of the benchmark's frame).
 const BAND_ROWS: usize = TILE_PX / 2;
 
-/// The levels of the exact kernel (`levels[..exact]`, each under
-/// [`crate::blur::IIR_MIN_SIGMA_PX`]), blurred from `source` and added into `plane`,
+/// The levels of the exact kernel at full rate (`levels[..exact]`, each under
+/// [`crate::blur::MULTIRATE_MIN_SIGMA_PX`]), blurred from `source` and added into `plane`,
 /// whose pixels not blurred keep their values and the others start at 0: in parallel over
 /// bands of [`BAND_ROWS`] rows, each blurring and adding its levels in their order, every
 /// level only over the band's rows and the runs of tiles that take it (with the kernel's
@@ -244,7 +245,7 @@ fn banded_levels(
     }
 }
 
-/// The levels `levels[from..]` (of the recursive filter), blurred from `source` and
+/// The levels `levels[from..]` (of the half-rate stages and the recursive filter), blurred from `source` and
 /// added into `plane` after the levels below them: one level after the other, each
 /// blurred over the regions that take it ([`Tiles::regions`]) with the reach of
 /// [`REGION_TOLERANCE`], in parallel.
