@@ -408,8 +408,7 @@ pub(crate) fn exact_pass<const P: usize, S: Default + Send>(
 /// [`MULTIRATE_MIN_SIGMA_PX`] or on a plane under two samples across or down.
 pub(crate) fn uses_full_rate_kernel(sigma_px: f32, width: usize, height: usize) -> bool {
     uses_exact_kernel(sigma_px, width, height)
-        && effective_sigma(sigma_px)
-            .is_some_and(|s| matches!(Finite::kind(s, width, height), FiniteKind::Exact))
+        && effective_sigma(sigma_px).is_some_and(|s| !Finite::half_rate(s, width, height))
 }
 
 /// The exact kernel of `sigma_px` from its centre outwards (`half[0..=r]`, `r` its radius),
@@ -417,14 +416,10 @@ pub(crate) fn uses_full_rate_kernel(sigma_px: f32, width: usize, height: usize) 
 /// the blur of `sigma_px` on a `width × height` plane is not the exact kernel at full
 /// rate ([`uses_full_rate_kernel`]).
 pub(crate) fn exact_half_kernel(sigma_px: f32, width: usize, height: usize) -> Option<Vec<f32>> {
-    if !uses_exact_kernel(sigma_px, width, height) {
+    if !uses_full_rate_kernel(sigma_px, width, height) {
         return None;
     }
-    let sigma = effective_sigma(sigma_px)?;
-    match Finite::new(sigma, width, height) {
-        Finite::Exact(half) => Some(half),
-        Finite::Multirate(_) => None,
-    }
+    effective_sigma(sigma_px).map(fir::half_kernel)
 }
 
 /// Some rows of the exact-kernel blur of a `width × height` plane with the kernel `half`
@@ -493,25 +488,17 @@ enum Finite {
     Multirate(multirate::Kernels),
 }
 
-/// Which [`Finite`] kernel a sigma takes on a plane.
-enum FiniteKind {
-    Exact,
-    Multirate,
-}
-
 impl Finite {
-    fn kind(sigma: f64, width: usize, height: usize) -> FiniteKind {
-        if sigma >= f64::from(MULTIRATE_MIN_SIGMA_PX) && width >= 2 && height >= 2 {
-            FiniteKind::Multirate
-        } else {
-            FiniteKind::Exact
-        }
+    /// Whether a sigma (under [`IIR_MIN_SIGMA_PX`]) takes the half-rate stages on a plane.
+    fn half_rate(sigma: f64, width: usize, height: usize) -> bool {
+        sigma >= f64::from(MULTIRATE_MIN_SIGMA_PX) && width >= 2 && height >= 2
     }
 
     fn new(sigma: f64, width: usize, height: usize) -> Self {
-        match Self::kind(sigma, width, height) {
-            FiniteKind::Multirate => Finite::Multirate(multirate::Kernels::new(sigma)),
-            FiniteKind::Exact => Finite::Exact(fir::half_kernel(sigma)),
+        if Self::half_rate(sigma, width, height) {
+            Finite::Multirate(multirate::Kernels::new(sigma))
+        } else {
+            Finite::Exact(fir::half_kernel(sigma))
         }
     }
 

@@ -123,7 +123,9 @@ pub const REGION_TOLERANCE: f64 = 1e-6;
 /// Each level is blurred only where pixels use it: the image is cut into tiles of 64²
 /// pixels, each tile needs the levels around the sigmas in it, and a level is blurred
 /// over rectangles covering its tiles and the blur's reach around them
-/// ([`crate::blur::reach_px`]). So the cost is about two blurs of each plane wherever the
+/// ([`crate::blur::reach_px`]). The levels of the full-rate exact kernel are blurred and
+/// added band by band (32 rows, each level over the runs of tiles that take it), so that
+/// the output stays in cache across them; the others level by level, over regions. So the cost is about two blurs of each plane wherever the
 /// sigmas vary smoothly, not one per level; the result is the whole-plane blur of every
 /// level's, bit for bit below [`crate::blur::IIR_MIN_SIGMA_PX`] and within
 /// [`REGION_TOLERANCE`] above (tested).
@@ -209,8 +211,12 @@ fn banded_levels(
             for [x0, x1] in tiles.runs(ty, j, r) {
                 let (c0, c1) = (x0.saturating_sub(r), (x1 + r).min(width));
                 let cw = c1 - c0;
-                buf.clear();
-                buf.resize(cw * rows, 0.0);
+                // Every sample is written by the blur: the buffer only grows, it is not
+                // cleared for each run.
+                if buf.len() < cw * rows {
+                    buf.resize(cw * rows, 0.0);
+                }
+                let buf = &mut buf[..cw * rows];
                 crate::blur::exact_rows(half, cw, height, y0, buf, |y, row| {
                     row.copy_from_slice(&source[y * width + c0..][..cw]);
                 });
