@@ -154,12 +154,42 @@ pub fn varying_gaussian_blur(
     let exact = levels.partition_point(|&s| crate::blur::uses_full_rate_kernel(s, width, height));
     let mut source = Vec::with_capacity(n);
     for p in planes.iter_mut() {
-        source.clear();
-        source.extend_from_slice(p);
+        let range = copy_with_range(p, &mut source);
         banded_levels(p, &source, width, sigma_px, &levels, exact, &tiles);
         if exact < levels.len() {
-            region_levels(p, &source, width, height, sigma_px, &levels, exact, &tiles);
+            region_levels(
+                p, &source, width, height, sigma_px, &levels, exact, &tiles, range,
+            );
         }
+    }
+}
+
+/// Samples per piece of [`copy_with_range`]'s parallel passes.
+const COPY_PIECE: usize = 64 * 1024;
+
+/// `plane` copied into `source` (which it replaces), and its range: largest minus smallest
+/// value, `+∞` when one is not finite. Both in parallel (they were serial passes over the
+/// plane, from memory, for each plane).
+fn copy_with_range(plane: &[f32], source: &mut Vec<f32>) -> f64 {
+    source.clear();
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        source.par_extend(plane.par_iter().copied());
+        let (lo, hi, finite) = plane
+            .par_chunks(COPY_PIECE)
+            .map(|c| widest!(range_kernel(c)))
+            .reduce(|| EMPTY_RANGE, join_ranges);
+        span(lo, hi, finite)
+    }
+    #[cfg(not(feature = "rayon"))]
+    {
+        source.extend_from_slice(plane);
+        let (lo, hi, finite) = plane
+            .chunks(COPY_PIECE)
+            .map(|c| widest!(range_kernel(c)))
+            .fold(EMPTY_RANGE, join_ranges);
+        span(lo, hi, finite)
     }
 }
 
@@ -254,7 +284,8 @@ fn banded_levels(
 /// The levels `levels[from..]` (of the half-rate stages and the recursive filter), blurred from `source` and
 /// added into `plane` after the levels below them: one level after the other, each
 /// blurred over the regions that take it ([`Tiles::regions`]) with the reach of
-/// [`REGION_TOLERANCE`], in parallel.
+/// [`REGION_TOLERANCE`] relative to `range` (that of `source`, [`copy_with_range`]), in
+/// parallel.
 #[allow(clippy::too_many_arguments)]
 fn region_levels(
     plane: &mut [f32],
@@ -265,8 +296,8 @@ fn region_levels(
     levels: &[f32],
     from: usize,
     tiles: &Tiles,
+    range: f64,
 ) {
-    let range = value_range(source);
     // Each row behind a lock: the regions of one level cover disjoint pieces, so they
     // are blurred and added in parallel, each row taking one level's sums in turn and
     // the levels in their order (the same result as one region after the other).
@@ -333,14 +364,26 @@ fn min_blur_sigma_f32() -> f32 {
     }
 }
 
-/// Largest minus smallest value of a plane (`+∞` when it holds a non-finite value).
-fn value_range(plane: &[f32]) -> f64 {
-    let (lo, hi, finite) = widest!(range_kernel(plane));
+/// Largest minus smallest (`+∞` when not all values are finite).
+fn span(lo: f32, hi: f32, finite: bool) -> f64 {
     if finite {
         f64::from(hi) - f64::from(lo)
     } else {
         f64::INFINITY
     }
+}
+
+/// [`range_kernel`] of no values.
+const EMPTY_RANGE: (f32, f32, bool) = (f32::INFINITY, f32::NEG_INFINITY, true);
+
+/// The [`range_kernel`] of two pieces joined, with its selects (so the same bounds as one
+/// pass over both).
+fn join_ranges(a: (f32, f32, bool), b: (f32, f32, bool)) -> (f32, f32, bool) {
+    (
+        if b.0 < a.0 { b.0 } else { a.0 },
+        if b.1 > a.1 { b.1 } else { a.1 },
+        a.2 & b.2,
+    )
 }
 
 /// Smallest and largest value of a plane and whether all are finite.
@@ -391,18 +434,40 @@ struct Tiles {
     levels: Vec<Option<(usize, usize)>>,
 }
 
+/// The sigma ranges of a band's tiles (`out`, one per [`TILE_PX`] columns) joined with
+/// those of its `rows` (`width` wide): [`SigmaRange::of`] each row's piece, as selects
+/// on `f32` (with `min_sigma` from [`min_blur_sigma_f32`], the same test as the `f64`
+/// one), so that the loop vectorises; the same ranges.
+#[inline(always)]
+fn tile_ranges(out: &mut [SigmaRange], rows: &[f32], width: usize, min_sigma: f32) {
+    for row in rows.chunks_exact(width) {
+        for (tile, seg) in out.iter_mut().zip(row.chunks(TILE_PX)) {
+            let (mut lo, mut hi, mut infinite) = (tile.min, tile.max, tile.infinite);
+            for &s in seg {
+                let blurred = s >= min_sigma;
+                let finite = blurred & s.is_finite();
+                lo = if finite & (s < lo) { s } else { lo };
+                hi = if finite & (s > hi) { s } else { hi };
+                infinite |= blurred & !s.is_finite();
+            }
+            *tile = SigmaRange {
+                min: lo,
+                max: hi,
+                infinite,
+            };
+        }
+    }
+}
+
 impl Tiles {
     /// The sigma range of every tile, in one pass over the sigmas.
     fn new(sigma_px: &[f32], width: usize, height: usize) -> Self {
         let (across, down) = (width.div_ceil(TILE_PX), height.div_ceil(TILE_PX));
+        let min_sigma = min_blur_sigma_f32();
         let band = |ty: usize| -> Vec<SigmaRange> {
             let mut out = vec![SigmaRange::EMPTY; across];
-            for y in ty * TILE_PX..((ty + 1) * TILE_PX).min(height) {
-                let row = &sigma_px[y * width..(y + 1) * width];
-                for (tile, seg) in out.iter_mut().zip(row.chunks(TILE_PX)) {
-                    *tile = tile.join(SigmaRange::of(seg));
-                }
-            }
+            let rows = &sigma_px[ty * TILE_PX * width..((ty + 1) * TILE_PX).min(height) * width];
+            widest!(tile_ranges(&mut out, rows, width, min_sigma));
             out
         };
         #[cfg(feature = "rayon")]
@@ -688,6 +753,71 @@ mod tests {
             }
             assert!(worst <= REGION_TOLERANCE, "σ {lo}..{hi}: {worst:e}");
         }
+    }
+
+    /// The tiles' sigma ranges (found with `f32` selects, [`tile_ranges`]) are those of
+    /// [`SigmaRange::of`] over each tile's pixels, on sigmas that include NaN, ±∞,
+    /// negative values and the values either side of [`MIN_BLUR_SIGMA_PX`], on an image
+    /// whose last tiles are partial.
+    #[test]
+    fn tile_ranges_are_those_of_each_tiles_pixels() {
+        let (w, h) = (2 * TILE_PX + 37, TILE_PX + 5);
+        let t = min_blur_sigma_f32();
+        let below = f32::from_bits(t.to_bits() - 1);
+        let special = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -1.0,
+            0.0,
+            below,
+            t,
+        ];
+        let mut seed = 99u32;
+        let sigma: Vec<f32> = (0..w * h)
+            .map(|_| {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let r = seed >> 8;
+                if r.is_multiple_of(50) {
+                    special[(r / 50) as usize % special.len()]
+                } else {
+                    0.3 + (r % 1000) as f32 * 0.02
+                }
+            })
+            .collect();
+        // One tile of small sigmas only, one with every special value, one with none
+        // blurred (the band's ranges must keep them apart).
+        let mut sigma = sigma;
+        for y in 0..TILE_PX {
+            for x in 0..TILE_PX {
+                sigma[y * w + x] = if x == 0 {
+                    special[y % special.len()]
+                } else {
+                    below
+                };
+            }
+        }
+        let tiles = Tiles::new(&sigma, w, h);
+        for ty in 0..tiles.down {
+            for tx in 0..tiles.across {
+                let mut want = SigmaRange::EMPTY;
+                for y in ty * TILE_PX..((ty + 1) * TILE_PX).min(h) {
+                    let x0 = tx * TILE_PX;
+                    want = want.join(SigmaRange::of(
+                        &sigma[y * w + x0..y * w + (x0 + TILE_PX).min(w)],
+                    ));
+                }
+                let got = tiles.sigmas[ty * tiles.across + tx];
+                assert_eq!(
+                    (got.min.to_bits(), got.max.to_bits(), got.infinite),
+                    (want.min.to_bits(), want.max.to_bits(), want.infinite),
+                    "tile ({tx}, {ty}): {got:?} against {want:?}"
+                );
+            }
+        }
+        // The special tile: only `t` and +∞ are blurred there.
+        let first = tiles.sigmas[0];
+        assert_eq!((first.min, first.max, first.infinite), (t, t, true));
     }
 
     /// Several planes blurred in one call, each of its own range: every plane is its
