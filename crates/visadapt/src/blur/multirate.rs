@@ -25,11 +25,11 @@
 //! exact kernel's 74 (37 along each axis). The second stage's even and odd outputs about
 //! one half-rate sample read the same inputs: the AVX-512 build computes the two
 //! together (along rows, and for an even row and the odd one after it down the ring),
-//! loading each input once where the two apart load it twice, each output still through
-//! its own operations in its own order (tested bit for bit). That took the three-plane
-//! 4K blur at 4.38 px from 23.0–23.5 to 20.3–20.4 ms (2 cores). The AVX2 build keeps
-//! them apart: together they ran 4 % slower there, the accumulators of both phases
-//! spilled from its 16 vector registers.
+//! three loads per tap for the two outputs where the two apart take four, each output
+//! still through its own operations in its own order (tested bit for bit). That took
+//! the three-plane 4K blur at 4.38 px from 23.0–23.5 to 20.3–20.4 ms (2 cores). The
+//! AVX2 build keeps them apart: together they ran 4 % slower there, the accumulators
+//! of both phases spilled from its 16 vector registers.
 //!
 //! It runs as the exact kernel does, as one pass over the rows with the stage before and
 //! after fused in ([`super::exact_pass`]): each input row is filtered along itself at
@@ -190,9 +190,10 @@ fn filter<const FMA: bool, const L: usize>(
 /// The second stage's two outputs about half-rate sample `p`, from the same loads: the
 /// even one, `be` centred on `x(0)` (the operations of `fir::tap_sum_lanes`), and the odd
 /// one, `bo` between `x(0)` and `x(1)` (those of [`between`]), each in its own order, so
-/// that both are the same bit for bit as when computed apart. The odd output's upper
-/// input at tap `j` is the even one's at `j + 1`, so each tap loads two inputs where the
-/// two apart load four.
+/// that both are the same bit for bit as when computed apart. The two share their lower
+/// input at each tap, so a tap loads three inputs for the two outputs where the two
+/// apart load four (carrying the odd output's upper input over as the even one's next,
+/// two loads, measured no faster).
 #[inline(always)]
 fn phases<'a, const FMA: bool, const N: usize>(
     be: &[f32],
@@ -633,8 +634,10 @@ mod tests {
     #[test]
     fn both_phases_together_are_the_phases_apart_bit_for_bit() {
         let src = noise(64, 1);
+        let mut lengths = std::collections::BTreeSet::new();
         for sigma in [3.5f64, 3.9, 4.38, 4.7, 4.99] {
             let k = Kernels::new(sigma);
+            lengths.insert(k.be.len() == k.bo.len());
             let mz = k.mz() as isize;
             for p in mz as usize..src.len() - mz as usize - 8 {
                 let x = |d: isize| fir::lanes_at::<8>(&src, p.wrapping_add_signed(d));
@@ -647,6 +650,11 @@ mod tests {
             }
             assert!(k.be.len().abs_diff(k.bo.len()) <= 1);
         }
+        assert_eq!(
+            lengths.len(),
+            2,
+            "kernel pairs of equal and of unequal length"
+        );
     }
 
     /// An impulse keeps its mass wherever it lies: an even and an odd position each sum
