@@ -509,6 +509,49 @@ impl Finite {
             Finite::Multirate(k) => k.reach(),
         }
     }
+
+    /// One segment of a pass with this kernel: `fir::segment` or `multirate::segment`,
+    /// which keep the same contract.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn segment<const FMA: bool, const L: usize, const P: usize, S>(
+        &self,
+        width: usize,
+        height: usize,
+        in_place: bool,
+        seg: fir::Segment<'_, P>,
+        fill: &impl Fn(usize, [&[f32]; P], [&mut [f32]; P]) -> S,
+        finish: &impl Fn(usize, [&mut [f32]; P]) -> S,
+        add: &impl Fn(S, S) -> S,
+    ) -> S
+    where
+        S: Default,
+    {
+        match self {
+            Finite::Exact(half) => fir::segment::<FMA, L, P, S>(
+                half,
+                width,
+                height,
+                in_place,
+                seg,
+                fill,
+                finish,
+                add,
+                S::default(),
+            ),
+            Finite::Multirate(k) => multirate::segment::<FMA, L, P, S>(
+                k,
+                width,
+                height,
+                in_place,
+                seg,
+                fill,
+                finish,
+                add,
+                S::default(),
+            ),
+        }
+    }
 }
 
 /// Rows per segment of an exact pass, at least this many radii (each segment also
@@ -582,30 +625,9 @@ fn exact_pass_with<const P: usize, S: Default + Send>(
         .collect();
     macro_rules! segment {
         ($fma:literal, $lanes:expr, $seg:expr) => {
-            match &kernel {
-                Finite::Exact(half) => fir::segment::<$fma, { $lanes }, P, S>(
-                    half,
-                    width,
-                    height,
-                    in_place,
-                    $seg,
-                    &fill,
-                    &finish,
-                    &add,
-                    S::default(),
-                ),
-                Finite::Multirate(k) => multirate::segment::<$fma, { $lanes }, P, S>(
-                    k,
-                    width,
-                    height,
-                    in_place,
-                    $seg,
-                    &fill,
-                    &finish,
-                    &add,
-                    S::default(),
-                ),
-            }
+            kernel.segment::<$fma, { $lanes }, P, S>(
+                width, height, in_place, $seg, &fill, &finish, &add,
+            )
         };
     }
     // One closure per level, so that each is compiled inside its target-feature function
