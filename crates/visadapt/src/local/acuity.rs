@@ -125,10 +125,10 @@ pub const REGION_TOLERANCE: f64 = 1e-6;
 /// over rectangles covering its tiles and the blur's reach around them
 /// ([`crate::blur::reach_px`]). The levels of the full-rate exact kernel are blurred and
 /// added band by band (32 rows, each level over the runs of tiles that take it), so that
-/// the output stays in cache across them; the others level by level, over regions. So the cost is about two blurs of each plane wherever the
-/// sigmas vary smoothly, not one per level; the result is the whole-plane blur of every
-/// level's, bit for bit below [`crate::blur::IIR_MIN_SIGMA_PX`] and within
-/// [`REGION_TOLERANCE`] above (tested).
+/// the output stays in cache across them; the others level by level, over regions. So
+/// the cost is about two blurs of each plane wherever the sigmas vary smoothly, not one
+/// per level; the result is the whole-plane blur of every level's, bit for bit below
+/// [`crate::blur::IIR_MIN_SIGMA_PX`] and within [`REGION_TOLERANCE`] above (tested).
 ///
 /// # Panics
 /// If a plane or `sigma_px` does not hold `width × height` values.
@@ -281,11 +281,11 @@ fn banded_levels(
     }
 }
 
-/// The levels `levels[from..]` (of the half-rate stages and the recursive filter), blurred from `source` and
-/// added into `plane` after the levels below them: one level after the other, each
-/// blurred over the regions that take it ([`Tiles::regions`]) with the reach of
-/// [`REGION_TOLERANCE`] relative to `range` (that of `source`, [`copy_with_range`]), in
-/// parallel.
+/// The levels `levels[from..]` (of the half-rate stages and the recursive filter),
+/// blurred from `source` and added into `plane` after the levels below them: one level
+/// after the other, each blurred over the regions that take it ([`Tiles::regions`]) with
+/// the reach of [`REGION_TOLERANCE`] relative to `range` (that of `source`,
+/// [`copy_with_range`]), in parallel.
 #[allow(clippy::too_many_arguments)]
 fn region_levels(
     plane: &mut [f32],
@@ -785,8 +785,8 @@ mod tests {
                 }
             })
             .collect();
-        // One tile of small sigmas only, one with every special value, one with none
-        // blurred (the band's ranges must keep them apart).
+        // The first tile: nothing blurred (just below the threshold) but its first
+        // column, which holds every special value, of which only `t` and +∞ count.
         let mut sigma = sigma;
         for y in 0..TILE_PX {
             for x in 0..TILE_PX {
