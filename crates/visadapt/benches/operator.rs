@@ -7,9 +7,9 @@
 //! * `stages/plan/1920x1080`, `stages/apply/1920x1080`, `stages/blur/1920x1080`: the
 //!   stages alone (`stages/blur` is the three-plane acuity Gaussian at the frame's sigma);
 //!   the same at `3840x2160`, where the kernel is twice as wide;
-//! * `memory_floor/1920x1080` (and `3840x2160`): one streaming pass that reads four f32 planes and writes
-//!   three (split over the same thread pool), the physical floor for one trip through
-//!   memory, against which the others are read as ratios;
+//! * `memory_floor/1920x1080` (and `3840x2160`): one streaming pass that reads four f32
+//!   planes and writes three (split over the same thread pool), the physical floor for
+//!   one trip through memory, against which the others are read as ratios;
 //! * `map_allocating/1920x1080`: `operator::map`, a one-off call that allocates its
 //!   output (the difference to `full` is the first touch of fresh memory).
 //!
