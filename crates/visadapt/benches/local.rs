@@ -19,8 +19,10 @@ mod common;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
-use visadapt::local::{self, LocalAdaptation, LocalMapping};
-use visadapt::operator::{AdaptationMode, ViewingConditions, apply_into, local_map, plan};
+use visadapt::local::{self, AdaptationMap, LocalAdaptation, LocalMapping};
+use visadapt::operator::{
+    AdaptationMode, ViewingConditions, apply_into, local_map, local_map_into, plan,
+};
 use visadapt::{DisplayImage, HdrImage, View};
 
 /// Four log units left to right, a fine checker, a colour cast varying over the frame.
@@ -37,14 +39,22 @@ fn conditions(w: usize, h: usize, adaptation: AdaptationMode) -> ViewingConditio
     }
 }
 
-fn run_local(im: &HdrImage, cond: &ViewingConditions, out: &mut DisplayImage) {
+/// The local operator on a frame in steady state: the map's planes and the display are
+/// reused from the frame before (as a video's frames reuse them), as the global
+/// operator's bench reuses its display.
+fn run_local(
+    im: &HdrImage,
+    cond: &ViewingConditions,
+    map: &mut AdaptationMap,
+    out: &mut DisplayImage,
+) {
     let AdaptationMode::Local(options) = cond.adaptation else {
         unreachable!("local conditions")
     };
     let report = plan(im, cond).expect("plan");
-    let map = local_map(im, &report, cond, &options).expect("map");
-    let mapping = LocalMapping::steady_state(&map, &report, options.rod_saturation);
-    black_box(local::apply_into(im, &map, &mapping, out));
+    local_map_into(im, &report, cond, &options, map).expect("map");
+    let mapping = LocalMapping::steady_state(map, &report, options.rod_saturation);
+    black_box(local::apply_into(im, map, &mapping, out));
 }
 
 fn bench(c: &mut Criterion) {
@@ -64,8 +74,9 @@ fn bench(c: &mut Criterion) {
             })
         });
         let local = conditions(w, h, local_mode);
+        let mut map = AdaptationMap::default();
         group.bench_function(BenchmarkId::new("local", &size), |b| {
-            b.iter(|| run_local(&im, &local, &mut out))
+            b.iter(|| run_local(&im, &local, &mut map, &mut out))
         });
     }
     group.finish();
@@ -76,6 +87,7 @@ fn bench(c: &mut Criterion) {
     let im = frame(w, h);
     group.throughput(Throughput::Elements((w * h) as u64));
     let mut out = DisplayImage::default();
+    let mut map = AdaptationMap::default();
     for radius in [0.25, 1.0, 4.0, 16.0] {
         let cond = conditions(
             w,
@@ -86,7 +98,7 @@ fn bench(c: &mut Criterion) {
             }),
         );
         group.bench_function(BenchmarkId::new(format!("{radius}"), "1920x1080"), |b| {
-            b.iter(|| run_local(&im, &cond, &mut out))
+            b.iter(|| run_local(&im, &cond, &mut map, &mut out))
         });
     }
     group.finish();
@@ -104,8 +116,12 @@ fn stages(c: &mut Criterion) {
         unreachable!("local conditions")
     };
     let report = plan(&im, &cond).expect("plan");
+    let mut kept = AdaptationMap::default();
     group.bench_function(BenchmarkId::new("map", &size), |b| {
-        b.iter(|| black_box(local_map(&im, &report, &cond, &options).expect("map")))
+        b.iter(|| {
+            local_map_into(&im, &report, &cond, &options, &mut kept).expect("map");
+            black_box(&kept);
+        })
     });
     let map = local_map(&im, &report, &cond, &options).expect("map");
     group.bench_function(BenchmarkId::new("tables", &size), |b| {

@@ -485,13 +485,28 @@ pub fn apply_state_into(
     conditions: &ViewingConditions,
     out: &mut DisplayImage,
 ) -> Result<(Mapping, PixelStats)> {
+    let mut map = AdaptationMap::default();
+    apply_state_reusing(image, report, state, conditions, &mut map, out)
+}
+
+/// [`apply_state_into`], with the adaptation map of local adaptation computed into `map`
+/// ([`local_map_into`]), whose planes a stream of frames reuses (left as it was with
+/// [`AdaptationMode::Global`]). The same result, bit for bit.
+pub fn apply_state_reusing(
+    image: &HdrImage,
+    report: &Report,
+    state: &crate::timecourse::Adaptation,
+    conditions: &ViewingConditions,
+    map: &mut AdaptationMap,
+    out: &mut DisplayImage,
+) -> Result<(Mapping, PixelStats)> {
     let mapping = state.mapping(report);
     let stats = match conditions.adaptation {
         AdaptationMode::Global => apply_into(image, &mapping, out),
         AdaptationMode::Local(options) => {
-            let map = local_map(image, report, conditions, &options)?;
-            let local = LocalMapping::for_time_course(&map, state, report, options.rod_saturation);
-            local::apply_into(image, &map, &local, out)
+            local_map_into(image, report, conditions, &options, map)?;
+            let local = LocalMapping::for_time_course(map, state, report, options.rod_saturation);
+            local::apply_into(image, map, &local, out)
         }
     };
     Ok((mapping, stats))
@@ -505,7 +520,21 @@ pub fn local_map(
     conditions: &ViewingConditions,
     options: &LocalAdaptation,
 ) -> Result<AdaptationMap> {
-    AdaptationMap::compute(
+    let mut map = AdaptationMap::default();
+    local_map_into(image, report, conditions, options, &mut map)?;
+    Ok(map)
+}
+
+/// [`local_map`] into `map`, reusing its planes ([`AdaptationMap::compute_into`]): for a
+/// stream of frames. On an error `map` is left as it was.
+pub fn local_map_into(
+    image: &HdrImage,
+    report: &Report,
+    conditions: &ViewingConditions,
+    options: &LocalAdaptation,
+    map: &mut AdaptationMap,
+) -> Result<()> {
+    map.compute_into(
         image,
         report,
         options.radius_deg,

@@ -21,6 +21,7 @@
 use crate::adaptation::highest_visible;
 use crate::io::display::{png_error, to_srgb8};
 use crate::io::output::PendingFile;
+use crate::local::AdaptationMap;
 use crate::operator::{self, Mapping, PixelStats, Report, ViewingConditions};
 use crate::timecourse::{Adaptation, check_times};
 use crate::{DisplayImage, Error, HdrImage, Result};
@@ -295,6 +296,8 @@ pub fn render_owned(
         ));
     }
     let mut out = DisplayImage::default();
+    // Local adaptation's map: its planes kept from frame to frame.
+    let mut map = AdaptationMap::default();
 
     scene.scale((sequence.from_cd_m2 / hv) as f32);
     scene.absolute_units = true;
@@ -308,7 +311,7 @@ pub fn render_owned(
         )?
         .with_undershoot(conditions.undershoot);
         let (mapping, stats) =
-            operator::apply_state_into(&retina, &before, &eye, conditions, &mut out)?;
+            operator::apply_state_reusing(&retina, &before, &eye, conditions, &mut map, &mut out)?;
         drop(retina);
         on_frame(&Frame {
             index: 0,
@@ -330,7 +333,7 @@ pub fn render_owned(
         eye.step_to(t - now, &after)?;
         now = t;
         let (mapping, stats) =
-            operator::apply_state_into(&retina, &after, &eye, conditions, &mut out)?;
+            operator::apply_state_reusing(&retina, &after, &eye, conditions, &mut map, &mut out)?;
         on_frame(&Frame {
             index: i + 1,
             t_seconds: Some(t),

@@ -70,6 +70,7 @@
 
 use crate::io::display::PngCompression;
 use crate::io::{self, OutputFormat};
+use crate::local::AdaptationMap;
 use crate::operator::{self, Mapping, PixelStats, Report, ViewingConditions};
 use crate::timecourse::Adaptation;
 use crate::{DisplayImage, Error, HdrImage, Limits, Result};
@@ -87,6 +88,8 @@ pub struct Observer {
     state: Option<Adaptation>,
     size: Option<(usize, usize)>,
     frames: u64,
+    /// The adaptation map of local adaptation, its planes kept from frame to frame.
+    map: AdaptationMap,
 }
 
 /// What the model did with one frame.
@@ -123,6 +126,7 @@ impl Observer {
             state: None,
             size: None,
             frames: 0,
+            map: AdaptationMap::default(),
         })
     }
 
@@ -165,8 +169,14 @@ impl Observer {
                 next
             }
         };
-        let (mapping, stats) =
-            operator::apply_state_into(&scene, &report, &state, &self.conditions, out)?;
+        let (mapping, stats) = operator::apply_state_reusing(
+            &scene,
+            &report,
+            &state,
+            &self.conditions,
+            &mut self.map,
+            out,
+        )?;
         let t_seconds = self.frames as f64 * self.dt_seconds;
         self.size = Some(size);
         self.frames += 1;

@@ -472,3 +472,71 @@ fn huge_finite_pixels_stay_finite() {
     // The rest of the image is not black.
     assert!(display_cd_m2(&out.image, 0) > 0.01);
 }
+
+/// A textured frame of `w × h` pixels with a lit patch (four log units of range).
+fn textured(w: usize, h: usize, seed: u32) -> HdrImage {
+    let mut img = HdrImage::zeros(w, h);
+    let mut s = seed;
+    for y in 0..h {
+        for x in 0..w {
+            let lit = x > w / 2 && y < h / 3;
+            let l = if lit { 500.0 } else { 0.05 } * (0.5 + noise(&mut s));
+            grey(&mut img, y * w + x, l);
+        }
+    }
+    img.absolute_units = true;
+    img
+}
+
+#[test]
+fn a_reused_map_is_a_fresh_one_bit_for_bit() {
+    use visadapt::local::AdaptationMap;
+    use visadapt::operator::{local_map, local_map_into, plan};
+    let options = LocalAdaptation::default();
+    let mut kept = AdaptationMap::default();
+    // Larger, smaller, then the same size again; with and without acuity (the sigma
+    // plane comes and goes).
+    for (w, h, acuity, seed) in [
+        (160, 90, true, 1),
+        (64, 48, true, 2),
+        (96, 64, false, 3),
+        (96, 64, true, 4),
+        (96, 64, true, 5),
+    ] {
+        let img = textured(w, h, seed);
+        let cond = ViewingConditions {
+            acuity,
+            view: Some(visadapt::View::perspective(20.0, w, h)),
+            ..local(options.radius_deg)
+        };
+        let report = plan(&img, &cond).expect("plan");
+        let fresh = local_map(&img, &report, &cond, &options).expect("map");
+        assert_eq!(fresh.acuity_sigma_px.is_some(), acuity, "{w}x{h}");
+        local_map_into(&img, &report, &cond, &options, &mut kept).expect("map");
+        assert_eq!(kept.offset_log.len(), w * h);
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&kept.offset_log), bits(&fresh.offset_log), "{w}x{h}");
+        assert_eq!(
+            bits(&kept.offset_scotopic_log),
+            bits(&fresh.offset_scotopic_log),
+            "{w}x{h}"
+        );
+        assert_eq!(
+            kept.acuity_sigma_px.as_deref().map(bits),
+            fresh.acuity_sigma_px.as_deref().map(bits),
+            "{w}x{h}"
+        );
+        assert_eq!(kept, fresh, "{w}x{h}");
+    }
+    // An invalid radius is refused and leaves the map as it was.
+    let img = textured(32, 32, 6);
+    let cond = local(1.0);
+    let report = plan(&img, &cond).expect("plan");
+    let before = kept.clone();
+    let bad = LocalAdaptation {
+        radius_deg: -1.0,
+        ..options
+    };
+    assert!(local_map_into(&img, &report, &cond, &bad, &mut kept).is_err());
+    assert_eq!(kept, before);
+}

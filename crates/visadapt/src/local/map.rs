@@ -105,7 +105,9 @@ pub const UPSAMPLING_RANGE_LOG: f32 = 0.5;
 
 /// Per pixel, the local adaptation as log10 offsets from the global world adaptation of an
 /// [`operator::plan`](crate::operator::plan) report (see the module docs).
-#[derive(Debug, Clone, PartialEq)]
+///
+/// The [`Default`] map is empty (no pixels), a start for [`AdaptationMap::compute_into`].
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct AdaptationMap {
     /// Width in pixels.
     pub width: usize,
@@ -132,7 +134,7 @@ pub struct AdaptationMap {
 }
 
 /// The filter grid: samples `step` pixels apart, row-major.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Grid {
     /// Samples per row.
     pub width: usize,
@@ -208,14 +210,7 @@ impl AdaptationMap {
             world_adaptation_scotopic_cd_m2: anchor_s,
             radius_deg: f64::NAN,
             grid_step_px: 0,
-            grid: Grid {
-                width: 0,
-                height: 0,
-                guide_log: Vec::new(),
-                offset_log: Vec::new(),
-                offset_scotopic_log: Vec::new(),
-                pixels_per_degree: Vec::new(),
-            },
+            grid: Grid::default(),
         })
     }
 
@@ -229,6 +224,24 @@ impl AdaptationMap {
         radius_deg: f64,
         hot_pixel_fraction: f64,
     ) -> Result<Self> {
+        let mut map = AdaptationMap::default();
+        map.compute_into(image, report, radius_deg, hot_pixel_fraction)?;
+        Ok(map)
+    }
+
+    /// [`AdaptationMap::compute`] into this map, whose per-pixel planes are reused when
+    /// they are large enough (a stream of frames of one size allocates them once): the
+    /// same map, bit for bit. Fresh planes are written from pages the system hands out
+    /// zeroed on first touch; at 1920 × 1080 their 24 MiB cost about 6,000 page faults
+    /// per frame, which reuse avoids (see the README's performance section). On an error
+    /// the map is left as it was.
+    pub fn compute_into(
+        &mut self,
+        image: &HdrImage,
+        report: &Report,
+        radius_deg: f64,
+        hot_pixel_fraction: f64,
+    ) -> Result<()> {
         image.check_consistent()?;
         if radius_deg.is_nan() || radius_deg <= 0.0 {
             return Err(Error::invalid(
@@ -319,25 +332,30 @@ impl AdaptationMap {
             pixels_per_degree: ppd,
         };
         let mut channels: Vec<&[f32]> = vec![&grid.offset_log, &grid.offset_scotopic_log];
+        let mut planes = vec![
+            std::mem::take(&mut self.offset_log),
+            std::mem::take(&mut self.offset_scotopic_log),
+        ];
+        let sigma_plane = self.acuity_sigma_px.take();
         if let Some(s) = &sigma_grid {
             channels.push(s);
+            planes.push(sigma_plane.unwrap_or_default());
         }
-        let mut planes = upsample(image, &grid, step, &channels).into_iter();
-        let offset_log = planes.next().expect("photopic plane");
-        let offset_scotopic_log = planes.next().expect("scotopic plane");
-        let acuity_sigma_px = planes.next();
-        Ok(AdaptationMap {
+        upsample(image, &grid, step, &channels, &mut planes);
+        let mut planes = planes.into_iter();
+        *self = AdaptationMap {
             width: w,
             height: h,
-            offset_log,
-            offset_scotopic_log,
-            acuity_sigma_px,
+            offset_log: planes.next().expect("photopic plane"),
+            offset_scotopic_log: planes.next().expect("scotopic plane"),
+            acuity_sigma_px: planes.next(),
             world_adaptation_cd_m2: report.world_adaptation_cd_m2,
             world_adaptation_scotopic_cd_m2: report.world_adaptation_scotopic_cd_m2,
             radius_deg,
             grid_step_px: step,
             grid,
-        })
+        };
+        Ok(())
     }
 }
 
@@ -709,11 +727,18 @@ fn log_photopic(image: &HdrImage, start: usize, out: &mut [f32]) {
     }
 }
 
-/// Joint bilateral upsampling of grid `channels` to every pixel (module docs): one plane
-/// per channel, written in place row by row (no interleaved copy). Along a row the grid
-/// samples change every `step` pixels; each run of pixels between the same four samples
-/// is computed with those samples held, so the loops vectorise.
-fn upsample(image: &HdrImage, grid: &Grid, step: usize, channels: &[&[f32]]) -> Vec<Vec<f32>> {
+/// Joint bilateral upsampling of grid `channels` to every pixel (module docs) into
+/// `planes` (one per channel, each reused if it can hold the image: every sample is
+/// written), row by row (no interleaved copy). Along a row the grid samples change
+/// every `step` pixels; each run of pixels between the same four samples is computed
+/// with those samples held, so the loops vectorise.
+fn upsample(
+    image: &HdrImage,
+    grid: &Grid,
+    step: usize,
+    channels: &[&[f32]],
+    planes: &mut [Vec<f32>],
+) {
     let (w, h) = (image.width, image.height);
     let n = w * h;
     let (gw, gh) = (grid.width, grid.height);
@@ -734,8 +759,16 @@ fn upsample(image: &HdrImage, grid: &Grid, step: usize, channels: &[&[f32]]) -> 
             _ => runs.push((x0, x1, x, x + 1)),
         }
     }
-    let mut planes: Vec<Vec<f32>> = channels.iter().map(|_| vec![0f32; n]).collect();
-    let mut rows = plane_rows(&mut planes, w);
+    assert_eq!(planes.len(), channels.len(), "one plane per channel");
+    for plane in planes.iter_mut() {
+        if plane.capacity() < n {
+            // Zeroed pages from the system, touched first by the parallel rows below.
+            *plane = vec![0f32; n];
+        } else {
+            plane.resize(n, 0.0);
+        }
+    }
+    let mut rows = plane_rows(planes, w);
     let row_fn = |y: usize, row: &mut [&mut [f32]]| {
         let at = grid_pos(y, gh);
         widest!(upsample_row(image, grid, channels, &runs, &tx, y, at, row))
@@ -753,8 +786,6 @@ fn upsample(image: &HdrImage, grid: &Grid, step: usize, channels: &[&[f32]]) -> 
             row_fn(y, row);
         }
     }
-    drop(rows);
-    planes
 }
 
 /// Row `y` of [`upsample`] into `row` (one slice per channel): `runs` of columns between
@@ -1113,7 +1144,8 @@ mod tests {
                     pixels_per_degree: Vec::new(),
                 };
                 let channels: [&[f32]; 2] = [&a, &b];
-                let got = upsample(&image, &grid, step, &channels);
+                let mut got = vec![Vec::new(); channels.len()];
+                upsample(&image, &grid, step, &channels, &mut got);
                 let want = reference_upsample(&image, &grid, step, &channels);
                 for (g, r) in got.iter().zip(&want) {
                     assert!(
