@@ -788,11 +788,16 @@ fn upsample(
     }
 }
 
+/// Pixels per piece of a run in [`upsample_row`]: the largest grid step
+/// ([`MAX_GRID_STEP_PX`]), so that a piece's weights fit in fixed arrays.
+const UPSAMPLE_PIECE: usize = MAX_GRID_STEP_PX;
+
 /// Row `y` of [`upsample`] into `row` (one slice per channel): `runs` of columns between
 /// the same two grid columns `(x0, x1, first column, end)`, `tx` per column the weight of
 /// the right-hand samples, `(y0, y1, ty)` the grid rows around the row and the weight of
-/// the lower one. The four taps' values are spread over the row first, so that every
-/// loop runs along the whole row (and vectorises).
+/// the lower one. Run by run (in pieces of at most [`UPSAMPLE_PIECE`] pixels), the four
+/// taps' weights are computed once for all channels, and each channel's four values are
+/// held in registers: nothing is spread over the row first.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn upsample_row(
@@ -805,87 +810,61 @@ fn upsample_row(
     (y0, y1, ty): (usize, usize, f32),
     row: &mut [&mut [f32]],
 ) {
+    const P: usize = UPSAMPLE_PIECE;
     let w = image.width;
     let gw = grid.width;
     let inv_range = 1.0 / UPSAMPLING_RANGE_LOG;
-    // The pixels' log luminance, the four taps' weights and their sum, the four taps'
-    // values (guide, then each channel's differences from the first) and the first.
-    let mut buf = vec![0f32; 11 * w];
-    let (lp, rest) = buf.split_at_mut(w);
-    let (sum, rest) = rest.split_at_mut(w);
-    let (weights, rest) = rest.split_at_mut(4 * w);
-    let (taps_v, base) = rest.split_at_mut(4 * w);
-    let (mut weights, mut taps_v) = (as_rows4(weights, w), as_rows4(taps_v, w));
-    let tx = &tx[..w];
-    log_photopic(image, y * w, lp);
+    // The pixels' log luminance.
+    let mut lp = vec![0f32; w];
+    log_photopic(image, y * w, &mut lp);
     let taps = |x0: usize, x1: usize| [y0 * gw + x0, y0 * gw + x1, y1 * gw + x0, y1 * gw + x1];
+    let mut weights = [[0f32; P]; 4];
+    let mut sum = [0f32; P];
     for &(x0, x1, start, end) in runs {
-        let guide = taps(x0, x1).map(|q| grid.guide_log[q]);
-        for (t, g) in taps_v.iter_mut().zip(guide) {
-            t[start..end].fill(g);
-        }
-    }
-    {
-        let [w0, w1, w2, w3] = &mut weights;
-        let [g0, g1, g2, g3] = &taps_v;
-        let (lp, sum) = (&lp[..w], &mut sum[..w]);
-        let (w0, w1, w2, w3) = (&mut w0[..w], &mut w1[..w], &mut w2[..w], &mut w3[..w]);
-        let (g0, g1, g2, g3) = (&g0[..w], &g1[..w], &g2[..w], &g3[..w]);
-        for x in 0..w {
-            let t = tx[x];
-            let bilinear = [
-                (1.0 - t) * (1.0 - ty),
-                t * (1.0 - ty),
-                (1.0 - t) * ty,
-                t * ty,
-            ];
-            let g = lp[x];
-            let guide = [g0[x], g1[x], g2[x], g3[x]];
-            let mut wq = [0f32; 4];
-            let mut sw = 0f32;
-            for k in 0..4 {
-                let r = (g - guide[k]) * inv_range;
-                let range = 1.0 / (1.0 + r * r);
-                wq[k] = bilinear[k] * range * range;
-                sw += wq[k];
+        let q = taps(x0, x1);
+        let guide = q.map(|q| grid.guide_log[q]);
+        for from in (start..end).step_by(P) {
+            let to = end.min(from + P);
+            let m = to - from;
+            let (lp, tx) = (&lp[from..to], &tx[from..to]);
+            for x in 0..m {
+                let t = tx[x];
+                let bilinear = [
+                    (1.0 - t) * (1.0 - ty),
+                    t * (1.0 - ty),
+                    (1.0 - t) * ty,
+                    t * ty,
+                ];
+                let g = lp[x];
+                let mut sw = 0f32;
+                for k in 0..4 {
+                    let r = (g - guide[k]) * inv_range;
+                    let range = 1.0 / (1.0 + r * r);
+                    let wq = bilinear[k] * range * range;
+                    weights[k][x] = wq;
+                    sw += wq;
+                }
+                sum[x] = sw;
             }
-            (w0[x], w1[x], w2[x], w3[x]) = (wq[0], wq[1], wq[2], wq[3]);
-            sum[x] = sw;
-        }
-    }
-    let [w0, w1, w2, w3] = &weights;
-    let (w0, w1, w2, w3) = (&w0[..w], &w1[..w], &w2[..w], &w3[..w]);
-    let sum = &sum[..w];
-    for (out, c) in row.iter_mut().zip(channels) {
-        for &(x0, x1, start, end) in runs {
-            let v = taps(x0, x1).map(|q| c[q]);
-            // A sum of differences from the first tap: equal taps give it exactly.
-            base[start..end].fill(v[0]);
-            for (t, v) in taps_v.iter_mut().zip(v) {
-                t[start..end].fill(v - base[start]);
+            let [w0, w1, w2, w3] = &weights;
+            let (w0, w1, w2, w3, sum) = (&w0[..m], &w1[..m], &w2[..m], &w3[..m], &sum[..m]);
+            for (out, c) in row.iter_mut().zip(channels) {
+                let v = q.map(|q| c[q]);
+                // A sum of differences from the first tap: equal taps give it exactly.
+                let base = v[0];
+                let d = v.map(|v| v - base);
+                let out = &mut out[from..to];
+                for x in 0..m {
+                    let mut s = 0f32;
+                    s += w0[x] * d[0];
+                    s += w1[x] * d[1];
+                    s += w2[x] * d[2];
+                    s += w3[x] * d[3];
+                    out[x] = base + s / sum[x];
+                }
             }
         }
-        let [d0, d1, d2, d3] = &taps_v;
-        let (d0, d1, d2, d3) = (&d0[..w], &d1[..w], &d2[..w], &d3[..w]);
-        let (out, base) = (&mut out[..w], &base[..w]);
-        for x in 0..w {
-            let mut s = 0f32;
-            s += w0[x] * d0[x];
-            s += w1[x] * d1[x];
-            s += w2[x] * d2[x];
-            s += w3[x] * d3[x];
-            out[x] = base[x] + s / sum[x];
-        }
     }
-}
-
-/// Four rows of `width` samples of `buf` (`4 · width` long).
-#[inline(always)]
-fn as_rows4(buf: &mut [f32], width: usize) -> [&mut [f32]; 4] {
-    let (a, rest) = buf.split_at_mut(width);
-    let (b, rest) = rest.split_at_mut(width);
-    let (c, d) = rest.split_at_mut(width);
-    [a, b, c, d]
 }
 
 /// Row `y` of every plane (`rows[y][c]`: row `y` of plane `c`, planes `width` samples
@@ -1130,7 +1109,9 @@ mod tests {
             if scotopic {
                 image.scotopic = Some(image.y.iter().map(|&v| 0.4 * v).collect());
             }
-            for step in [1usize, 2, 5, 23] {
+            // Runs of up to 1.5 steps at the edges: step 32 (the largest) gives runs of
+            // 48 pixels, longer than a piece of `upsample_row`.
+            for step in [1usize, 2, 5, 23, MAX_GRID_STEP_PX] {
                 let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
                 let guide: Vec<f32> = (0..gw * gh).map(|_| 4.0 * noise() - 2.0).collect();
                 let a: Vec<f32> = (0..gw * gh).map(|_| noise() - 3.0).collect();
