@@ -82,6 +82,7 @@ use crate::mesopic::rod_weight;
 use crate::operator::{self, Mapping, PixelStats, Report};
 use crate::scale::{photopic_scale, scotopic_scale};
 use crate::scotopic;
+use crate::simd::{Avx512, Isa};
 use crate::{DisplayImage, Error, HdrImage, Result};
 
 /// Default radius of the adaptation neighbourhood, degrees: the fovea and its immediate
@@ -140,6 +141,13 @@ pub(crate) struct Table<const K: usize> {
     /// Per node the difference to the next node's values (the last node's: 0), so that
     /// a look-up reads one entry of each vector.
     deltas: Vec<[f32; K]>,
+    /// The values again, coefficient by coefficient (`value_columns[k·stride + node]`,
+    /// `stride` = nodes + [`LOOKUP_LANES`], the last node repeated after it), so that
+    /// [`Table::at_lanes_permuted`] loads [`LOOKUP_LANES`] consecutive nodes of one
+    /// coefficient from any node of the table.
+    value_columns: Vec<f32>,
+    /// The deltas likewise.
+    delta_columns: Vec<f32>,
 }
 
 impl<const K: usize> Table<K> {
@@ -158,8 +166,19 @@ impl<const K: usize> Table<K> {
                 None => [0.0; K],
             })
             .collect();
+        let columns = |rows: &Vec<[f32; K]>| -> Vec<f32> {
+            let last = rows.last().copied().unwrap_or([0.0; K]);
+            (0..K)
+                .flat_map(|k| {
+                    let padding = std::iter::repeat_n(last[k], LOOKUP_LANES);
+                    rows.iter().map(move |r| r[k]).chain(padding)
+                })
+                .collect()
+        };
         Table {
             start: -below / steps,
+            value_columns: columns(&values),
+            delta_columns: columns(&deltas),
             values,
             deltas,
         }
@@ -204,11 +223,22 @@ impl<const K: usize> Table<K> {
         (i, p - i)
     }
 
-    /// [`Table::at`] for `N` offsets into `out` (`out[k][lane]`): [`Table::at_lanes`]
-    /// where it applies, else the general look-up one offset at a time.
+    /// [`Table::at`] for a block of offsets into `out` (`out[k][lane]`):
+    /// [`Table::at_lanes_permuted`] with a proof of AVX-512 (`permute`), else
+    /// [`Table::at_lanes`], where it applies; else the general look-up one offset at a
+    /// time. The same values every way.
     #[inline(always)]
-    fn lanes_into<const N: usize>(&self, offsets: &[f32; N], out: &mut [[f32; N]; K]) {
-        if !self.at_lanes(offsets, out) {
+    fn lanes_into(
+        &self,
+        permute: Option<Avx512>,
+        offsets: &[f32; LOOKUP_LANES],
+        out: &mut [[f32; LOOKUP_LANES]; K],
+    ) {
+        let done = match permute {
+            Some(p) => self.at_lanes_permuted(p, offsets, out),
+            None => self.at_lanes(offsets, out),
+        };
+        if !done {
             for (l, &d) in offsets.iter().enumerate() {
                 for (k, c) in self.at(d).into_iter().enumerate() {
                     out[k][l] = c;
@@ -277,6 +307,65 @@ impl<const K: usize> Table<K> {
             }
             for l in 0..N {
                 out[l] = al[l] + t[l] * dl[l];
+            }
+        }
+        true
+    }
+
+    /// [`Table::at_lanes`] with a lane permute (`vpermps`, [`Avx512::permute16`]): when
+    /// the block's nodes lie within [`LOOKUP_LANES`] consecutive ones (else false, and
+    /// `out` is left as it was), each coefficient's rows are one load of
+    /// [`LOOKUP_LANES`] consecutive nodes from its column and one permute by each lane's
+    /// step from the first, in place of [`LOOKUP_SPAN`]` − 1` selects and broadcasts per
+    /// row. Each value is `a + t·d` of the same `a`, `d` and `t` as [`Table::at`]'s, so
+    /// the same bit for bit.
+    #[inline(always)]
+    fn at_lanes_permuted(
+        &self,
+        p: Avx512,
+        offsets: &[f32; LOOKUP_LANES],
+        out: &mut [[f32; LOOKUP_LANES]; K],
+    ) -> bool {
+        const N: usize = LOOKUP_LANES;
+        let mut node = [0f32; N];
+        let mut t = [0f32; N];
+        for l in 0..N {
+            (node[l], t[l]) = self.locate(offsets[l]);
+        }
+        // The lower of the end lanes' nodes (the lowest of a monotonic block); a node is
+        // at most the table's last but one, and the columns run `N` beyond the last.
+        let first = if node[N - 1] < node[0] {
+            node[N - 1]
+        } else {
+            node[0]
+        };
+        let mut step = [0u32; N];
+        let mut inside = first >= 0.0;
+        for l in 0..N {
+            let s = node[l] - first;
+            inside &= (s >= 0.0) & (s < N as f32);
+            // A whole `s` in `0..N` is the low bits of `s + 2²³` (exact): the index
+            // without a float-to-integer conversion, which Rust saturates (scalar code).
+            step[l] = (s + TWO_23).to_bits() & (N as u32 - 1);
+        }
+        if !inside {
+            return false;
+        }
+        // A whole number in `0..=last` (a NaN node failed the test above).
+        let first = first as usize;
+        let stride = self.values.len() + N;
+        for (k, out) in out.iter_mut().enumerate() {
+            let at = k * stride + first;
+            let (Some(a), Some(d)) = (
+                self.value_columns.get(at..at + N),
+                self.delta_columns.get(at..at + N),
+            ) else {
+                return false;
+            };
+            let a = p.permute16(a.try_into().expect("N values"), &step);
+            let d = p.permute16(d.try_into().expect("N values"), &step);
+            for l in 0..N {
+                out[l] = a[l] + t[l] * d[l];
             }
         }
         true
@@ -519,13 +608,21 @@ fn map_chunk(
     g: &mut [f32],
     b: &mut [f32],
 ) -> PixelStats {
-    widest!(map_chunk_kernel(mapping, xyz, scotopic, offsets, r, g, b))
+    let isa = Isa::detect();
+    let permute = isa.avx512();
+    crate::simd::at_level!(
+        isa,
+        map_chunk_kernel(mapping, permute, xyz, scotopic, offsets, r, g, b)
+    )
 }
 
-/// [`map_chunk`]'s loop: one copy per kind of scotopic input, each branch-free.
+/// [`map_chunk`]'s loop: one copy per kind of scotopic input, each branch-free; the
+/// table look-ups with lane permutes when `permute` ([`Table::at_lanes_permuted`]).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn map_chunk_kernel(
     mapping: &LocalMapping,
+    permute: Option<Avx512>,
     xyz: [&[f32]; 3],
     scotopic: Option<&[f32]>,
     offsets: [&[f32]; 2],
@@ -535,8 +632,8 @@ fn map_chunk_kernel(
 ) -> PixelStats {
     let mut counts = [0u32; 3];
     match scotopic {
-        Some(s) => map_pixels::<true>(mapping, xyz, s, offsets, [r, g, b], &mut counts),
-        None => map_pixels::<false>(mapping, xyz, &[], offsets, [r, g, b], &mut counts),
+        Some(s) => map_pixels::<true>(mapping, permute, xyz, s, offsets, [r, g, b], &mut counts),
+        None => map_pixels::<false>(mapping, permute, xyz, &[], offsets, [r, g, b], &mut counts),
     }
     let [non_finite, negative, saturated] = counts.map(|c| c as usize);
     PixelStats {
@@ -565,11 +662,13 @@ const LOOKUP_SPAN: usize = 8;
 ///
 /// Pixels are mapped in blocks of [`LOOKUP_LANES`] (the last one padded with zeros).
 /// A block whose table nodes lie within [`LOOKUP_SPAN`] consecutive ones (nearly all:
-/// the map is smooth) takes its coefficients as vectors ([`Table::at_lanes`]); the
-/// others, one pixel at a time. Both give the same values.
+/// the map is smooth) takes its coefficients as vectors ([`Table::at_lanes`]; with
+/// AVX-512, within [`LOOKUP_LANES`] nodes by lane permutes, [`Table::at_lanes_permuted`]);
+/// the others, one pixel at a time. All give the same values.
 #[inline(always)]
 fn map_pixels<const FILE_SCOTOPIC: bool>(
     mapping: &LocalMapping,
+    permute: Option<Avx512>,
     [xs, ys, zs]: [&[f32]; 3],
     s: &[f32],
     [dp, ds]: [&[f32]; 2],
@@ -594,8 +693,8 @@ fn map_pixels<const FILE_SCOTOPIC: bool>(
         let at = block * N..(block + 1) * N;
         let lanes = |v: &[f32]| -> [f32; N] { v[at.clone()].try_into().expect("a block") };
         let (dpb, dsb) = (lanes(dp), lanes(ds));
-        mapping.cone.lanes_into(&dpb, &mut cone);
-        mapping.rod.lanes_into(&dsb, &mut rod);
+        mapping.cone.lanes_into(permute, &dpb, &mut cone);
+        mapping.rod.lanes_into(permute, &dsb, &mut rod);
         let (r, g, b) = (&mut r[at.clone()], &mut g[at.clone()], &mut b[at.clone()]);
         let out: [&mut [f32; N]; 3] = [r, g, b].map(|o| o.try_into().expect("a block"));
         let sv = if FILE_SCOTOPIC { lanes(s) } else { [0.0; N] };
@@ -611,8 +710,8 @@ fn map_pixels<const FILE_SCOTOPIC: bool>(
         let pad = |v: &[f32]| -> [f32; N] {
             std::array::from_fn(|l| v.get(rest.start + l).copied().unwrap_or(0.0))
         };
-        mapping.cone.lanes_into(&pad(dp), &mut cone);
-        mapping.rod.lanes_into(&pad(ds), &mut rod);
+        mapping.cone.lanes_into(permute, &pad(dp), &mut cone);
+        mapping.rod.lanes_into(permute, &pad(ds), &mut rod);
         let sv = if FILE_SCOTOPIC { pad(s) } else { [0.0; N] };
         let input = [pad(xs), pad(ys), pad(zs), sv];
         let mut out = [[0f32; N]; 3];
@@ -813,6 +912,49 @@ mod tests {
         assert!(!t.at_lanes(&nan, &mut [[0f32; 16]; 3]));
     }
 
+    /// [`Table::at_lanes_permuted`] likewise, with its span of 16 nodes, up to both ends
+    /// of the table (where its columns' padding is loaded but never selected).
+    #[test]
+    fn permuted_look_ups_are_the_single_ones_bit_for_bit() {
+        let Some(p) = Isa::Avx512Fma.avx512() else {
+            eprintln!("no AVX-512 on this processor: the permuted look-up is not run");
+            return;
+        };
+        let t = Table::<3>::new(-2.0, 1.5, |d| {
+            [10f64.powf(-d) as f32, d.cos() as f32, (0.3 * d) as f32]
+        });
+        let (mut taken, mut declined) = (0, 0);
+        for slope in [0.0f32, 0.05, 0.4, 0.9, 2.0, -0.9] {
+            for start in [-2.6f32, -1.99, -1.95, -0.5, 0.0, 0.77, 1.40, 1.49, 2.2] {
+                let offsets: [f32; 16] =
+                    std::array::from_fn(|l| start + slope * l as f32 / TABLE_STEPS_PER_LOG_UNIT);
+                let mut out = [[7f32; 16]; 3];
+                if t.at_lanes_permuted(p, &offsets, &mut out) {
+                    taken += 1;
+                    for (l, &d) in offsets.iter().enumerate() {
+                        let want = t.at(d);
+                        for k in 0..3 {
+                            assert_eq!(
+                                out[k][l].to_bits(),
+                                want[k].to_bits(),
+                                "{slope} {start} {l}"
+                            );
+                        }
+                    }
+                } else {
+                    declined += 1;
+                    assert_eq!(out, [[7f32; 16]; 3], "left as it was");
+                    assert!(slope.abs() > 1.0, "{slope} {start}");
+                }
+            }
+        }
+        // Declined: slope 2 (30 nodes) wherever the block is not clamped onto the ends.
+        assert!(declined > 0 && taken > 40, "{taken} {declined}");
+        let mut nan = [0.3f32; 16];
+        nan[5] = f32::NAN;
+        assert!(!t.at_lanes_permuted(p, &nan, &mut [[0f32; 16]; 3]));
+    }
+
     /// The mapping pass (blocks through [`Table::at_lanes`] and the general look-up, and
     /// the last pixels) gives the per-pixel loop's values and counts bit for bit, on
     /// smooth offsets and on noise, with and without a scotopic plane, bad pixels and
@@ -916,17 +1058,32 @@ mod tests {
         let n = 3000;
         let mut noise = noise(21);
         let planes = test_planes(n, &mut noise);
-        let dp: Vec<f32> = (0..n).map(|_| 6.0 * noise() - 4.0).collect();
-        let ds: Vec<f32> = (0..n).map(|_| 6.0 * noise() - 4.0).collect();
+        // Offsets at random (the general look-up) and smooth ones (the block look-ups:
+        // with AVX-512, the permuted one).
+        let rough = |noise: &mut dyn FnMut() -> f32| -> Vec<f32> {
+            (0..n).map(|_| 6.0 * noise() - 4.0).collect()
+        };
+        let smooth = |phase: f32| -> Vec<f32> {
+            (0..n)
+                .map(|i| 2.5 * (i as f32 * 0.002 + phase).sin() - 1.0)
+                .collect()
+        };
+        let offsets = [
+            (rough(&mut noise), rough(&mut noise)),
+            (smooth(0.0), smooth(1.0)),
+        ];
         let mapping = test_mapping();
-        for scotopic in [None, Some(planes[3].as_slice())] {
+        for ((dp, ds), scotopic) in offsets
+            .iter()
+            .flat_map(|o| [(o, None), (o, Some(planes[3].as_slice()))])
+        {
             let xyz = [planes[0].as_slice(), &planes[1], &planes[2]];
             let mut want = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
             let [r, g, b] = want.each_mut().map(|v| v.as_mut_slice());
-            let ws = map_chunk_kernel(&mapping, xyz, scotopic, [&dp, &ds], r, g, b);
+            let ws = map_chunk_kernel(&mapping, None, xyz, scotopic, [dp, ds], r, g, b);
             let mut got = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
             let [r, g, b] = got.each_mut().map(|v| v.as_mut_slice());
-            let gs = map_chunk(&mapping, xyz, scotopic, [&dp, &ds], r, g, b);
+            let gs = map_chunk(&mapping, xyz, scotopic, [dp, ds], r, g, b);
             assert_eq!(ws, gs);
             for (a, b) in got.iter().flatten().zip(want.iter().flatten()) {
                 assert_eq!(a.to_bits(), b.to_bits());
