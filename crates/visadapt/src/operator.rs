@@ -500,11 +500,39 @@ pub fn apply_state_reusing(
     map: &mut AdaptationMap,
     out: &mut DisplayImage,
 ) -> Result<(Mapping, PixelStats)> {
+    if let AdaptationMode::Local(options) = conditions.adaptation {
+        local_map_into(image, report, conditions, &options, map)?;
+    }
+    apply_state_with_map(image, report, state, conditions, map, out)
+}
+
+/// [`apply_state_into`] with local adaptation's map given: `map` must be the adaptation
+/// map of `image` under `report` and `conditions` ([`local_map`], [`local_map_into`]),
+/// e.g. one map for the many frames of one image seen at different states
+/// ([`crate::sequence`]). With [`AdaptationMode::Global`] it is not read. Refuses a map
+/// of another size than the image.
+pub fn apply_state_with_map(
+    image: &HdrImage,
+    report: &Report,
+    state: &crate::timecourse::Adaptation,
+    conditions: &ViewingConditions,
+    map: &AdaptationMap,
+    out: &mut DisplayImage,
+) -> Result<(Mapping, PixelStats)> {
     let mapping = state.mapping(report);
     let stats = match conditions.adaptation {
         AdaptationMode::Global => apply_into(image, &mapping, out),
         AdaptationMode::Local(options) => {
-            local_map_into(image, report, conditions, &options, map)?;
+            if (map.width, map.height) != (image.width, image.height) {
+                return Err(Error::invalid(
+                    "adaptation map",
+                    format!("{}x{}", map.width, map.height),
+                    format!(
+                        "must be of the image's size, {}x{}",
+                        image.width, image.height
+                    ),
+                ));
+            }
             let local = LocalMapping::for_time_course(map, state, report, options.rod_saturation);
             local::apply_into(image, map, &local, out)
         }

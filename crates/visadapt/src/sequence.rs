@@ -22,7 +22,7 @@ use crate::adaptation::highest_visible;
 use crate::io::display::{png_error, to_srgb8};
 use crate::io::output::PendingFile;
 use crate::local::AdaptationMap;
-use crate::operator::{self, Mapping, PixelStats, Report, ViewingConditions};
+use crate::operator::{self, AdaptationMode, Mapping, PixelStats, Report, ViewingConditions};
 use crate::timecourse::{Adaptation, check_times};
 use crate::{DisplayImage, Error, HdrImage, Result};
 use std::fs::File;
@@ -327,13 +327,18 @@ pub fn render_owned(
 
     scene.scale((sequence.to_cd_m2 / sequence.from_cd_m2) as f32);
     let (retina, after) = operator::prepare_owned(scene, conditions)?;
+    // Every frame from here on is this retina under this plan, so local adaptation's map
+    // is the same for all of them: computed once.
+    if let AdaptationMode::Local(options) = conditions.adaptation {
+        operator::local_map_into(&retina, &after, conditions, &options, &mut map)?;
+    }
     eye.step_to(0.0, &after)?;
     let mut now = 0.0;
     for (i, &t) in sequence.times_seconds.iter().enumerate() {
         eye.step_to(t - now, &after)?;
         now = t;
         let (mapping, stats) =
-            operator::apply_state_reusing(&retina, &after, &eye, conditions, &mut map, &mut out)?;
+            operator::apply_state_with_map(&retina, &after, &eye, conditions, &map, &mut out)?;
         on_frame(&Frame {
             index: i + 1,
             t_seconds: Some(t),

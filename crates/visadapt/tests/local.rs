@@ -540,3 +540,59 @@ fn a_reused_map_is_a_fresh_one_bit_for_bit() {
     assert!(local_map_into(&img, &report, &cond, &bad, &mut kept).is_err());
     assert_eq!(kept, before);
 }
+
+/// A sequence computes local adaptation's map once for all frames after the step
+/// (`operator::apply_state_with_map`): each frame equals the frame stage computed on its
+/// own with a fresh map (`operator::apply_state_into`), bit for bit; a map of another
+/// size is refused.
+#[test]
+fn a_sequences_frames_share_one_map_bit_for_bit() {
+    use visadapt::adaptation::highest_visible;
+    use visadapt::local::AdaptationMap;
+    use visadapt::operator::{apply_state_into, apply_state_with_map, prepare};
+    use visadapt::sequence::{Sequence, render};
+    let scene = textured(120, 80, 9);
+    let cond = ViewingConditions {
+        acuity: true,
+        view: Some(visadapt::View::perspective(20.0, 120, 80)),
+        ..local(1.0)
+    };
+    let seq = Sequence::new(300.0, 0.05, vec![1.0, 30.0, 300.0]).expect("sequence");
+    // The retina of the frames after the step, as `render` rescales the scene in place.
+    let mut after_scene = scene.clone();
+    let hv = f64::from(highest_visible(&after_scene.y, cond.hot_pixel_fraction));
+    after_scene.scale((seq.from_cd_m2 / hv) as f32);
+    after_scene.absolute_units = true;
+    after_scene.scale((seq.to_cd_m2 / seq.from_cd_m2) as f32);
+    let (retina, after) = prepare(&after_scene, &cond).expect("prepare");
+    let mut compared = 0;
+    render(&scene, &seq, &cond, |f| {
+        if f.index > 0 {
+            assert_eq!(
+                f.report.world_adaptation_cd_m2,
+                after.world_adaptation_cd_m2
+            );
+            let mut want = DisplayImage::default();
+            let (_, stats) = apply_state_into(&retina, &after, f.adaptation, &cond, &mut want)
+                .expect("frame");
+            assert_same_pixels(f.image, &want, &format!("frame {}", f.index));
+            assert_eq!(f.stats, stats);
+            compared += 1;
+        }
+        Ok(())
+    })
+    .expect("render");
+    assert_eq!(compared, 3);
+    let other = AdaptationMap::default();
+    let state = visadapt::timecourse::Adaptation::adapted(1.0, 2.0).expect("state");
+    let err = apply_state_with_map(
+        &retina,
+        &after,
+        &state,
+        &cond,
+        &other,
+        &mut DisplayImage::default(),
+    )
+    .expect_err("a map of another size");
+    assert!(err.to_string().contains("adaptation map"), "{err}");
+}
