@@ -296,8 +296,6 @@ pub fn render_owned(
         ));
     }
     let mut out = DisplayImage::default();
-    // Local adaptation's map: its planes kept from frame to frame.
-    let mut map = AdaptationMap::default();
 
     scene.scale((sequence.from_cd_m2 / hv) as f32);
     scene.absolute_units = true;
@@ -311,7 +309,7 @@ pub fn render_owned(
         )?
         .with_undershoot(conditions.undershoot);
         let (mapping, stats) =
-            operator::apply_state_reusing(&retina, &before, &eye, conditions, &mut map, &mut out)?;
+            operator::apply_state_into(&retina, &before, &eye, conditions, &mut out)?;
         drop(retina);
         on_frame(&Frame {
             index: 0,
@@ -328,7 +326,9 @@ pub fn render_owned(
     scene.scale((sequence.to_cd_m2 / sequence.from_cd_m2) as f32);
     let (retina, after) = operator::prepare_owned(scene, conditions)?;
     // Every frame from here on is this retina under this plan, so local adaptation's map
-    // is the same for all of them: computed once.
+    // is the same for all of them: computed once (the first frame's is dropped by now, so
+    // the two are never held together).
+    let mut map = AdaptationMap::default();
     if let AdaptationMode::Local(options) = conditions.adaptation {
         operator::local_map_into(&retina, &after, conditions, &options, &mut map)?;
     }

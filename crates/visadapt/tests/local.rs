@@ -573,8 +573,8 @@ fn a_sequences_frames_share_one_map_bit_for_bit() {
                 after.world_adaptation_cd_m2
             );
             let mut want = DisplayImage::default();
-            let (_, stats) = apply_state_into(&retina, &after, f.adaptation, &cond, &mut want)
-                .expect("frame");
+            let (_, stats) =
+                apply_state_into(&retina, &after, f.adaptation, &cond, &mut want).expect("frame");
             assert_same_pixels(f.image, &want, &format!("frame {}", f.index));
             assert_eq!(f.stats, stats);
             compared += 1;
