@@ -12,10 +12,10 @@
 //! of the crate is here: the call of that function, after checking that the processor
 //! has the features, and one instruction the compiler does not make of portable code
 //! (a 16-lane permute, [`Avx512::permute16`], for the table look-ups of local
-//! adaptation: 6.7 against 8.0 ms for the 1080p mapping pass, `local_stages/mapping`). Kernels take a `const FMA: bool` to use [`madd`] with a
-//! fused multiply-add only where the instruction exists (elsewhere `f32::mul_add` would
-//! be a slow library call); results of the two paths differ only in rounding, which the
-//! kernels' tests bound.
+//! adaptation: 6.7 against 8.0 ms for the 1080p mapping pass, `local_stages/mapping`).
+//! Kernels take a `const FMA: bool` to use [`madd`] with a fused multiply-add only where
+//! the instruction exists (elsewhere `f32::mul_add` would be a slow library call);
+//! results of the two paths differ only in rounding, which the kernels' tests bound.
 //!
 //! The closures are marked `#[inline(always)]` (by the macros, [`at_level!`] and
 //! [`run_inlined!`], the only way the crate calls [`Isa::run`]). Without the mark, whether

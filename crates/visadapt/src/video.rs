@@ -89,7 +89,17 @@ pub struct Observer {
     size: Option<(usize, usize)>,
     frames: u64,
     /// The adaptation map of local adaptation, its planes kept from frame to frame.
-    map: AdaptationMap,
+    map: KeptMap,
+}
+
+/// The map an [`Observer`] keeps, shown by `Debug` as its size only (not its planes).
+#[derive(Clone, Default)]
+struct KeptMap(AdaptationMap);
+
+impl std::fmt::Debug for KeptMap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "AdaptationMap({}x{})", self.0.width, self.0.height)
+    }
 }
 
 /// What the model did with one frame.
@@ -126,7 +136,7 @@ impl Observer {
             state: None,
             size: None,
             frames: 0,
-            map: AdaptationMap::default(),
+            map: KeptMap::default(),
         })
     }
 
@@ -174,7 +184,7 @@ impl Observer {
             &report,
             &state,
             &self.conditions,
-            &mut self.map,
+            &mut self.map.0,
             out,
         )?;
         let t_seconds = self.frames as f64 * self.dt_seconds;
