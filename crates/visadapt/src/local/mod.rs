@@ -900,8 +900,11 @@ mod tests {
             &[-2.6, -1.99, -1.95, -0.5, 0.0, 0.77, 1.40, 1.49, 2.2],
             1.0,
         );
-        // Declined: slope 2 (30 nodes) wherever the block is not clamped onto the ends.
-        assert!(declined > 0 && taken > 40, "{taken} {declined}");
+        // Declined: the five blocks of slope 2 (30 nodes over the 16 lanes) that lie inside
+        // the table (from −1.99, −1.95, −0.5, 0 and 0.77); from −2.6 the block is clamped
+        // onto the first node, and from 1.40, 1.49 and 2.2 it spans at most the 13 nodes
+        // left to the table's end (1.5). Slope 0.9 spans 13.5 nodes, within the 16.
+        assert_eq!((taken, declined), (49, 5));
     }
 
     /// A block look-up (`look_up`) of a test table against its single look-ups, over
