@@ -354,6 +354,11 @@ impl<const K: usize> Table<K> {
         // A whole number in `0..=last` (a NaN node failed the test above).
         let first = first as usize;
         let stride = self.values.len() + N;
+        // Always true (`first` is at most the last node but one); tested before any lane
+        // is written, so that `out` is left as it was if not.
+        if (K - 1) * stride + first + N > self.value_columns.len() {
+            return false;
+        }
         for (k, out) in out.iter_mut().enumerate() {
             let at = k * stride + first;
             let (Some(a), Some(d)) = (
