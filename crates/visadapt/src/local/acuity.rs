@@ -435,27 +435,41 @@ struct Tiles {
 }
 
 /// The sigma ranges of a band's tiles (`out`, one per [`TILE_PX`] columns) joined with
-/// those of its `rows` (`width` wide): [`SigmaRange::of`] each row's piece, as selects
-/// on `f32` (with `min_sigma` from [`min_blur_sigma_f32`], the same test as the `f64`
-/// one), so that the loop vectorises; the same ranges.
+/// those of its `rows` (`width` wide): [`SigmaRange::of`] each column of the band first
+/// (elementwise down the rows, as selects on `f32` with `min_sigma` from
+/// [`min_blur_sigma_f32`], the same test as the `f64` one, so that the loop vectorises
+/// across columns), then each tile's columns. The same ranges: a smallest and a largest
+/// value do not depend on the order in which they are found (no NaN and no zero is kept).
 #[inline(always)]
 fn tile_ranges(out: &mut [SigmaRange], rows: &[f32], width: usize, min_sigma: f32) {
+    let mut lo = vec![f32::INFINITY; width];
+    let mut hi = vec![SigmaRange::EMPTY.max; width];
+    let mut infinite = vec![0u8; width];
     for row in rows.chunks_exact(width) {
-        for (tile, seg) in out.iter_mut().zip(row.chunks(TILE_PX)) {
-            let (mut lo, mut hi, mut infinite) = (tile.min, tile.max, tile.infinite);
-            for &s in seg {
-                let blurred = s >= min_sigma;
-                let finite = blurred & s.is_finite();
-                lo = if finite & (s < lo) { s } else { lo };
-                hi = if finite & (s > hi) { s } else { hi };
-                infinite |= blurred & !s.is_finite();
-            }
-            *tile = SigmaRange {
-                min: lo,
-                max: hi,
-                infinite,
-            };
+        for (((l, h), inf), &s) in lo.iter_mut().zip(&mut hi).zip(&mut infinite).zip(row) {
+            let blurred = s >= min_sigma;
+            let finite = blurred & s.is_finite();
+            *l = if finite & (s < *l) { s } else { *l };
+            *h = if finite & (s > *h) { s } else { *h };
+            *inf |= u8::from(blurred & !s.is_finite());
         }
+    }
+    let columns = lo
+        .chunks(TILE_PX)
+        .zip(hi.chunks(TILE_PX))
+        .zip(infinite.chunks(TILE_PX));
+    for (tile, ((lo, hi), infinite)) in out.iter_mut().zip(columns) {
+        let (mut min, mut max, mut inf) = (tile.min, tile.max, tile.infinite);
+        for ((&l, &h), &i) in lo.iter().zip(hi).zip(infinite) {
+            min = if l < min { l } else { min };
+            max = if h > max { h } else { max };
+            inf |= i != 0;
+        }
+        *tile = SigmaRange {
+            min,
+            max,
+            infinite: inf,
+        };
     }
 }
 
