@@ -258,24 +258,7 @@ impl AdaptationMap {
 
         // Block means of the log luminances (the guide is the photopic one).
         let (guide, scot) = block_log_means(image, step, gw, gh);
-        // Pixels per degree at each sample (trigonometry per sample: in parallel rows, as
-        // a grid of step 1 on a wide view has a sample per pixel).
-        let mut ppd = vec![0f32; gw * gh];
-        let ppd_row = |(gy, row): (usize, &mut [f32])| {
-            let cy = ((gy * step) as f64 + (step.min(h - gy * step)) as f64 / 2.0).min(h as f64);
-            for (gx, p) in row.iter_mut().enumerate() {
-                let cx =
-                    ((gx * step) as f64 + (step.min(w - gx * step)) as f64 / 2.0).min(w as f64);
-                *p = (1.0 / pixel_size_deg(&view, w, h, cx, cy)) as f32;
-            }
-        };
-        #[cfg(feature = "rayon")]
-        {
-            use rayon::prelude::*;
-            ppd.par_chunks_mut(gw).enumerate().for_each(ppd_row);
-        }
-        #[cfg(not(feature = "rayon"))]
-        ppd.chunks_mut(gw).enumerate().for_each(ppd_row);
+        let ppd = pixels_per_degree_grid(&view, w, h, step);
         let mut phot: Vec<f64> = guide.iter().map(|&v| f64::from(v)).collect();
         let mut scot: Vec<f64> = scot.iter().map(|&v| f64::from(v)).collect();
         let guide64: Vec<f64> = phot.clone();
@@ -365,6 +348,56 @@ impl AdaptationMap {
         };
         Ok(())
     }
+}
+
+/// Pixels per degree at each sample of the grid of `step` over a `w × h` image in `view`
+/// (at the centre of its block of pixels), row by row.
+///
+/// The trigonometry is per sample, so the rows run in parallel (a grid of step 1 on a
+/// wide view has a sample per pixel), and where the grid is symmetric about the image's
+/// centre only a quarter of it is computed: when `step` divides both sides, the samples
+/// mirrored left to right (or top to bottom) are at positions mirrored exactly, and for
+/// the projections built from the distance to the centre and the signed offsets along
+/// each axis (all but the cylindrical one, which takes a sine of the signed angle) the
+/// directions there are mirrored exactly too (one component's sign), so the pixel sizes
+/// are the same bit for bit (the differences, cross product and norms only change sign
+/// where they change; tested against every sample computed).
+fn pixels_per_degree_grid(view: &View, w: usize, h: usize, step: usize) -> Vec<f32> {
+    let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
+    let centre = |g: usize, n: usize| {
+        ((g * step) as f64 + (step.min(n - g * step)) as f64 / 2.0).min(n as f64)
+    };
+    let mirrored = !matches!(view.projection, Projection::Cylindrical)
+        && w.is_multiple_of(step)
+        && h.is_multiple_of(step);
+    let (cw, ch) = if mirrored {
+        (gw.div_ceil(2), gh.div_ceil(2))
+    } else {
+        (gw, gh)
+    };
+    let mut ppd = vec![0f32; gw * gh];
+    let row = |(gy, row): (usize, &mut [f32])| {
+        let cy = centre(gy, h);
+        for (gx, p) in row.iter_mut().enumerate().take(cw) {
+            *p = (1.0 / pixel_size_deg(view, w, h, centre(gx, w), cy)) as f32;
+        }
+        for gx in cw..gw {
+            row[gx] = row[gw - 1 - gx];
+        }
+    };
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        ppd.par_chunks_mut(gw).enumerate().take(ch).for_each(row);
+    }
+    #[cfg(not(feature = "rayon"))]
+    ppd.chunks_mut(gw).enumerate().take(ch).for_each(row);
+    let (top, bottom) = ppd.split_at_mut(ch * gw);
+    for (k, out) in bottom.chunks_exact_mut(gw).enumerate() {
+        let gy = ch + k;
+        out.copy_from_slice(&top[(gh - 1 - gy) * gw..][..gw]);
+    }
+    ppd
 }
 
 /// The grid step for a radius of `radius_px` pixels.
@@ -669,19 +702,32 @@ fn for_each_chunk(v: &mut [f64], f: impl Fn(&mut [f64]) + Sync + Send) {
     f(v);
 }
 
+/// Rows whose recursions [`recursive_pass`] interleaves.
+const ROWS_TOGETHER: usize = 8;
+
 /// One iteration of the domain transform's recursive filter over a `gw × gh` grid `c`:
 /// the causal and anti-causal passes along every row, then along every column, with the
 /// weights `wh` (from the sample to the left) and `wv` (from the sample above).
 fn recursive_pass(c: &mut [f64], wh: &[f64], wv: &[f64], gw: usize, gh: usize) {
-    // Rows.
-    for y in 0..gh {
-        let row = &mut c[y * gw..(y + 1) * gw];
-        let wr = &wh[y * gw..(y + 1) * gw];
+    // Rows, [`ROWS_TOGETHER`] at a time, their recursions interleaved: each row's is a
+    // chain of dependent operations, so that one row at a time waits on their latency.
+    // Every sample takes the same operations in the same order.
+    for (rows, wr) in c
+        .chunks_mut(ROWS_TOGETHER * gw)
+        .zip(wh.chunks(ROWS_TOGETHER * gw))
+    {
+        let n = rows.len() / gw;
         for x in 1..gw {
-            row[x] = row[x - 1] + (1.0 - wr[x]) * (row[x] - row[x - 1]);
+            for k in 0..n {
+                let i = k * gw + x;
+                rows[i] = rows[i - 1] + (1.0 - wr[i]) * (rows[i] - rows[i - 1]);
+            }
         }
         for x in (0..gw.saturating_sub(1)).rev() {
-            row[x] = row[x + 1] + (1.0 - wr[x + 1]) * (row[x] - row[x + 1]);
+            for k in 0..n {
+                let i = k * gw + x;
+                rows[i] = rows[i + 1] + (1.0 - wr[i + 1]) * (rows[i] - rows[i + 1]);
+            }
         }
     }
     // Columns (the inner loop runs along a row: it vectorises).
@@ -1188,6 +1234,69 @@ mod tests {
         let at60 = pixel_size_deg(&f, 1000, 1000, 500.0 + 1000.0 / 3.0, 500.0);
         let theta = 60f64.to_radians();
         assert!((at60 / (0.18 * (theta.sin() / theta).sqrt()) - 1.0).abs() < 1e-3);
+    }
+
+    /// The grid's pixels per degree, a quarter computed and mirrored where the grid is
+    /// symmetric, are every sample's own ([`pixel_size_deg`] at its block's centre) bit
+    /// for bit: every projection, odd and even sides, steps that divide the sides and
+    /// steps that do not, wide and narrow views.
+    #[test]
+    fn mirrored_pixels_per_degree_are_each_samples_own() {
+        use Projection::*;
+        let projections = [
+            Perspective,
+            AngularFisheye,
+            HemisphericalFisheye,
+            Cylindrical,
+            Planisphere,
+            Parallel,
+        ];
+        let shapes = [
+            (64, 48, 1),
+            (63, 47, 1),
+            (64, 48, 4),
+            (66, 50, 4),
+            (65, 45, 5),
+            (20, 20, 3),
+            (1, 1, 1),
+            (2, 7, 2),
+        ];
+        let mut varying = 0;
+        for projection in projections {
+            for (fov_h, fov_v) in [(170.0, 120.0), (30.0, 20.0), (360.0, 360.0)] {
+                for (w, h, step) in shapes {
+                    let view = View {
+                        projection,
+                        horizontal_deg: fov_h,
+                        vertical_deg: fov_v,
+                    };
+                    let got = pixels_per_degree_grid(&view, w, h, step);
+                    let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
+                    assert_eq!(got.len(), gw * gh);
+                    let centre = |g: usize, n: usize| {
+                        ((g * step) as f64 + (step.min(n - g * step)) as f64 / 2.0).min(n as f64)
+                    };
+                    for gy in 0..gh {
+                        for gx in 0..gw {
+                            let size = pixel_size_deg(&view, w, h, centre(gx, w), centre(gy, h));
+                            let want = (1.0 / size) as f32;
+                            let got = got[gy * gw + gx];
+                            assert_eq!(
+                                got.to_bits(),
+                                want.to_bits(),
+                                "{projection:?} {fov_h}° {w}×{h} step {step} ({gx}, {gy}): \
+                                 {got} against {want}"
+                            );
+                        }
+                    }
+                    // Not a constant scale, which any mirroring would give right.
+                    if gw > 2 && got[0] != got[gw / 2] {
+                        varying += 1;
+                    }
+                }
+            }
+        }
+        assert!(varying > 20, "{varying} grids with a varying scale");
     }
 
     /// The quantile by selection is the sorted order's value at the rank, for values with
