@@ -261,16 +261,13 @@ impl AdaptationMap {
         let ppd = pixels_per_degree_grid(&view, w, h, step);
         let mut phot: Vec<f64> = guide.iter().map(|&v| f64::from(v)).collect();
         let mut scot: Vec<f64> = scot.iter().map(|&v| f64::from(v)).collect();
-        let guide64: Vec<f64> = phot.clone();
-        let step_deg: Vec<f64> = ppd.iter().map(|&p| step as f64 / f64::from(p)).collect();
-        domain_transform(
-            &mut [&mut phot, &mut scot],
-            &guide64,
-            &step_deg,
+        let links = link_lengths_deg(
+            |i| f64::from(guide[i]),
+            |i| step as f64 / f64::from(ppd[i]),
             gw,
             gh,
-            radius_deg,
         );
+        domain_transform(&mut [&mut phot, &mut scot], links, gw, gh, radius_deg);
         let anchor = |v: &[f64]| high_quantile(v, hot_pixel_fraction);
         let (qp, qs) = (anchor(&phot), anchor(&scot));
         let offset_grid: Vec<f32> = phot.iter().map(|&v| (v - qp) as f32).collect();
@@ -651,7 +648,15 @@ fn block_band(image: &HdrImage, step: usize, gy: usize, guide: &mut [f32], scot:
 /// sample i−1 to i along the row, `dv[i]` from the sample above (0 on the first column
 /// and row): the mean of the two samples' widths plus `EDGE_DEGREES_PER_LOG_UNIT` times
 /// the guide's step between them.
-fn link_lengths_deg(guide: &[f64], step_deg: &[f64], gw: usize, gh: usize) -> (Vec<f64>, Vec<f64>) {
+///
+/// `guide(i)` and `step_deg(i)` give sample `i`'s guide and width, so that they need not
+/// be planes of their own (on a wide view's grid of step 1, each is 5 MiB per megapixel).
+fn link_lengths_deg(
+    guide: impl Fn(usize) -> f64,
+    step_deg: impl Fn(usize) -> f64,
+    gw: usize,
+    gh: usize,
+) -> (Vec<f64>, Vec<f64>) {
     let n = gw * gh;
     let mut dh = vec![0f64; n];
     let mut dv = vec![0f64; n];
@@ -659,12 +664,12 @@ fn link_lengths_deg(guide: &[f64], step_deg: &[f64], gw: usize, gh: usize) -> (V
         for x in 0..gw {
             let i = y * gw + x;
             if x > 0 {
-                dh[i] = 0.5 * (step_deg[i] + step_deg[i - 1])
-                    + EDGE_DEGREES_PER_LOG_UNIT * (guide[i] - guide[i - 1]).abs();
+                dh[i] = 0.5 * (step_deg(i) + step_deg(i - 1))
+                    + EDGE_DEGREES_PER_LOG_UNIT * (guide(i) - guide(i - 1)).abs();
             }
             if y > 0 {
-                dv[i] = 0.5 * (step_deg[i] + step_deg[i - gw])
-                    + EDGE_DEGREES_PER_LOG_UNIT * (guide[i] - guide[i - gw]).abs();
+                dv[i] = 0.5 * (step_deg(i) + step_deg(i - gw))
+                    + EDGE_DEGREES_PER_LOG_UNIT * (guide(i) - guide(i - gw)).abs();
             }
         }
     }
@@ -672,47 +677,43 @@ fn link_lengths_deg(guide: &[f64], step_deg: &[f64], gw: usize, gh: usize) -> (V
 }
 
 /// The domain transform's recursive filter (module docs) of `channels` in place, on a
-/// `gw × gh` grid whose samples are `step_deg` degrees wide, edges from `guide`.
+/// `gw × gh` grid with the link lengths `(dh, dv)` of [`link_lengths_deg`].
 fn domain_transform(
     channels: &mut [&mut Vec<f64>],
-    guide: &[f64],
-    step_deg: &[f64],
+    (dh, dv): (Vec<f64>, Vec<f64>),
     gw: usize,
     gh: usize,
     sigma_deg: f64,
 ) {
-    let (dh, dv) = link_lengths_deg(guide, step_deg, gw, gh);
     let iterations = ITERATIONS as i32;
     let norm = 3f64.sqrt() / (4f64.powi(iterations) - 1.0).sqrt();
     // Weight of the previous sample, `a_i^d = exp(−√2·d/σ_i)`; 1 (a constant signal) for
     // an infinite sigma. Each iteration halves `σ_i`, so its weights are the previous
-    // iteration's squared: one exponential per link, not one per link and iteration.
+    // iteration's squared: one exponential per link, not one per link and iteration. The
+    // weights are squared in place after each iteration, so that one set is held.
     let sigma_0 = sigma_deg * norm * 2f64.powi(iterations - 1);
     let weight = |d: f64| (-std::f64::consts::SQRT_2 * d / sigma_0).exp();
     let mut wh = dh;
     let mut wv = dv;
     for_each_chunk(&mut wh, |w| w.iter_mut().for_each(|d| *d = weight(*d)));
     for_each_chunk(&mut wv, |w| w.iter_mut().for_each(|d| *d = weight(*d)));
-    let mut weights = vec![(wh, wv)];
-    for _ in 1..iterations {
-        let (h, v) = weights.last().expect("first iteration");
-        let square = |w: &Vec<f64>| -> Vec<f64> { w.iter().map(|&a| a * a).collect() };
-        weights.push((square(h), square(v)));
-    }
-    // The channels are independent: one per thread.
-    let filter = |c: &mut Vec<f64>| {
-        for (wh, wv) in &weights {
-            recursive_pass(c, wh, wv, gw, gh);
+    for i in 0..iterations {
+        if i > 0 {
+            for_each_chunk(&mut wh, |w| w.iter_mut().for_each(|a| *a = *a * *a));
+            for_each_chunk(&mut wv, |w| w.iter_mut().for_each(|a| *a = *a * *a));
         }
-    };
-    #[cfg(feature = "rayon")]
-    {
-        use rayon::prelude::*;
-        channels.par_iter_mut().for_each(|c| filter(c));
-    }
-    #[cfg(not(feature = "rayon"))]
-    for c in channels.iter_mut() {
-        filter(c);
+        // The channels are independent: one per thread.
+        #[cfg(feature = "rayon")]
+        {
+            use rayon::prelude::*;
+            channels
+                .par_iter_mut()
+                .for_each(|c| recursive_pass(c, &wh, &wv, gw, gh));
+        }
+        #[cfg(not(feature = "rayon"))]
+        for c in channels.iter_mut() {
+            recursive_pass(c, &wh, &wv, gw, gh);
+        }
     }
 }
 
@@ -980,7 +981,7 @@ mod tests {
         gh: usize,
         sigma_deg: f64,
     ) {
-        let (dh, dv) = link_lengths_deg(guide, step_deg, gw, gh);
+        let (dh, dv) = link_lengths_deg(|i| guide[i], |i| step_deg[i], gw, gh);
         let iterations = ITERATIONS as i32;
         let norm = 3f64.sqrt() / (4f64.powi(iterations) - 1.0).sqrt();
         for i in 0..iterations {
@@ -1014,7 +1015,8 @@ mod tests {
         for sigma in [0.25, 1.0, 16.0, f64::INFINITY] {
             let (mut a, mut b) = (guide.clone(), scot.clone());
             let (mut ra, mut rb) = (guide.clone(), scot.clone());
-            domain_transform(&mut [&mut a, &mut b], &guide, &step_deg, gw, gh, sigma);
+            let links = link_lengths_deg(|i| guide[i], |i| step_deg[i], gw, gh);
+            domain_transform(&mut [&mut a, &mut b], links, gw, gh, sigma);
             reference_domain_transform(&mut [&mut ra, &mut rb], &guide, &step_deg, gw, gh, sigma);
             let worst = a
                 .iter()
