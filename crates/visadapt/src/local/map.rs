@@ -382,8 +382,9 @@ impl AdaptationMap {
 /// the projections built from the distance to the centre and the signed offsets along
 /// each axis (all but the cylindrical one, which takes a sine of the signed angle) the
 /// directions there are mirrored exactly too (one component's sign), so the pixel sizes
-/// are the same bit for bit (the differences, cross product and norms only change sign
-/// where they change; tested against every sample computed).
+/// are the same bit for bit: the differences and the cross product change only in the
+/// signs of some components, the norms not at all (tested against every sample
+/// computed).
 fn pixels_per_degree_grid(view: &View, w: usize, h: usize, step: usize) -> Vec<f32> {
     let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
     let centre = |g: usize, n: usize| {
