@@ -292,24 +292,8 @@ impl AdaptationMap {
                         0.0
                     }
                 };
-                // A piece of samples in order, a sample whose offsets are the last one's
-                // (bit for bit) taking its sigma: the same value without its dozen
-                // transcendental functions. Uniform areas repeat them (the dark corners
-                // of a fisheye image: a fifth of the samples of `office-fisheye.hdr`).
-                let piece = |(out, (dp, ds)): (&mut [f32], (&[f32], &[f32]))| {
-                    let mut last: Option<([u32; 2], f32)> = None;
-                    for ((o, &p), &s) in out.iter_mut().zip(dp).zip(ds) {
-                        let key = [p.to_bits(), s.to_bits()];
-                        *o = match last {
-                            Some((k, v)) if k == key => v,
-                            _ => {
-                                let v = sigma(p, s);
-                                last = Some((key, v));
-                                v
-                            }
-                        };
-                    }
-                };
+                let piece =
+                    |(out, (dp, ds)): (&mut [f32], (&[f32], &[f32]))| by_runs(out, dp, ds, sigma);
                 let mut sigmas = vec![0f32; offset_grid.len()];
                 #[cfg(feature = "rayon")]
                 {
@@ -651,7 +635,8 @@ fn block_band(image: &HdrImage, step: usize, gy: usize, guide: &mut [f32], scot:
 /// the guide's step between them.
 ///
 /// `guide(i)` and `step_deg(i)` give sample `i`'s guide and width, so that they need not
-/// be planes of their own (on a wide view's grid of step 1, each is 5 MiB per megapixel).
+/// be planes of their own (`f64`, on a wide view's grid of step 1 each would be 8 bytes
+/// per pixel).
 fn link_lengths_deg(
     guide: impl Fn(usize) -> f64,
     step_deg: impl Fn(usize) -> f64,
@@ -727,6 +712,26 @@ fn for_each_chunk(v: &mut [f64], f: impl Fn(&mut [f64]) + Sync + Send) {
     }
     #[cfg(not(feature = "rayon"))]
     f(v);
+}
+
+/// `out[i] = f(a[i], b[i])`, a sample whose inputs are the last one's (bit for bit)
+/// taking its value instead of calling `f` again: the same values for a deterministic
+/// `f`. For the grid's acuity sigmas (a dozen transcendental functions each), whose
+/// offsets repeat over uniform areas (the dark corners of a fisheye image: a fifth of
+/// the samples of `office-fisheye.hdr`).
+fn by_runs(out: &mut [f32], a: &[f32], b: &[f32], f: impl Fn(f32, f32) -> f32) {
+    let mut last: Option<([u32; 2], f32)> = None;
+    for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
+        let key = [x.to_bits(), y.to_bits()];
+        *o = match last {
+            Some((k, v)) if k == key => v,
+            _ => {
+                let v = f(x, y);
+                last = Some((key, v));
+                v
+            }
+        };
+    }
 }
 
 /// Samples per piece of the grid's acuity sigmas (in parallel).
@@ -1328,6 +1333,44 @@ mod tests {
             }
         }
         assert!(varying > 20, "{varying} grids with a varying scale");
+    }
+
+    /// [`by_runs`] gives every sample `f` of its own inputs, and calls `f` once per run
+    /// of samples whose two inputs repeat bit for bit: runs broken by either input alone,
+    /// by a zero of the other sign and by a NaN of another payload; a NaN repeated is a
+    /// run.
+    #[test]
+    fn by_runs_is_each_samples_own_value() {
+        let nan2 = f32::from_bits(f32::NAN.to_bits() | 1);
+        let a = [
+            1.0,
+            1.0,
+            1.0,
+            2.0,
+            2.0,
+            0.0,
+            -0.0,
+            f32::NAN,
+            f32::NAN,
+            nan2,
+            3.0,
+            3.0,
+        ];
+        let b = [5.0, 5.0, 6.0, 6.0, 6.0, 7.0, 7.0, 8.0, 8.0, 8.0, 9.0, 9.0];
+        let calls = std::cell::Cell::new(0);
+        let f = |x: f32, y: f32| {
+            calls.set(calls.get() + 1);
+            // Tells every input apart: a NaN's payload and a zero's sign included.
+            f32::from_bits(x.to_bits().rotate_left(7) ^ y.to_bits())
+        };
+        let mut out = [0f32; 12];
+        by_runs(&mut out, &a, &b, f);
+        for i in 0..a.len() {
+            let want = f32::from_bits(a[i].to_bits().rotate_left(7) ^ b[i].to_bits());
+            assert_eq!(out[i].to_bits(), want.to_bits(), "sample {i}");
+        }
+        // Runs: (1,5)×2, (1,6), (2,6)×2, (0,7), (−0,7), (NaN,8)×2, (NaN',8), (3,9)×2.
+        assert_eq!(calls.get(), 8);
     }
 
     /// The quantile by selection is the sorted order's value at the rank, for values with
