@@ -5,13 +5,24 @@
 //! Both are stored as flat, planar `f32` buffers (one `Vec<f32>` per channel, row-major,
 //! top row first), the layout every hot loop of the library works on.
 
+/// A plane as `Debug` shows it: its number of samples, not the samples (a 1080p plane
+/// has two million), so that `{:?}` of an image, a map or anything that holds one (a
+/// video observer, a failed `assert_eq!`) stays short.
+pub(crate) struct Samples<'a>(pub(crate) &'a [f32]);
+
+impl std::fmt::Debug for Samples<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "<{} samples>", self.0.len())
+    }
+}
+
 /// A high-dynamic-range image in absolute photometric units.
 ///
 /// * `x`, `y`, `z`: CIE 1931 tristimulus values with `y` the photopic luminance in cd/m².
 /// * `scotopic`: the scotopic luminance in scotopic cd/m² (CIE 1951 V'(λ), K'm = 1700 lm/W),
 ///   when the source carried it (the paper's own file format does). When it is `None`, the
 ///   operator estimates it from XYZ (see [`scotopic`](crate::scotopic)).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct HdrImage {
     /// Width in pixels.
     pub width: usize,
@@ -38,6 +49,35 @@ pub struct HdrImage {
     /// layout), or `None` when nothing says. The operator adapts the cone image from it to
     /// the display white ([`colour::WhitePoint::Auto`](crate::colour::WhitePoint)).
     pub adopted_white: Option<crate::colour::Xy>,
+}
+
+/// The image's size, units, view and white, and of each plane its number of samples
+/// ([`Samples`]).
+impl std::fmt::Debug for HdrImage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let HdrImage {
+            width,
+            height,
+            x,
+            y,
+            z,
+            scotopic,
+            view,
+            absolute_units,
+            adopted_white,
+        } = self;
+        f.debug_struct("HdrImage")
+            .field("width", width)
+            .field("height", height)
+            .field("x", &Samples(x))
+            .field("y", &Samples(y))
+            .field("z", &Samples(z))
+            .field("scotopic", &scotopic.as_deref().map(Samples))
+            .field("view", view)
+            .field("absolute_units", absolute_units)
+            .field("adopted_white", adopted_white)
+            .finish()
+    }
 }
 
 impl HdrImage {
@@ -247,7 +287,7 @@ impl View {
 /// planar, relative to the display maximum luminance (1.0 = `L_dmax`), each value in
 /// `[0, 1]`. `DisplayImage::default()` is an empty image, for buffers that
 /// [`operator::apply_into`](crate::operator::apply_into) fills and reuses.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Clone, Default, PartialEq)]
 pub struct DisplayImage {
     /// Width in pixels.
     pub width: usize,
@@ -261,6 +301,29 @@ pub struct DisplayImage {
     pub b: Vec<f32>,
     /// The display maximum luminance in cd/m² that 1.0 stands for.
     pub display_max_cd_m2: f32,
+}
+
+/// The image's size and display maximum, and of each plane its number of samples
+/// ([`Samples`]).
+impl std::fmt::Debug for DisplayImage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let DisplayImage {
+            width,
+            height,
+            r,
+            g,
+            b,
+            display_max_cd_m2,
+        } = self;
+        f.debug_struct("DisplayImage")
+            .field("width", width)
+            .field("height", height)
+            .field("r", &Samples(r))
+            .field("g", &Samples(g))
+            .field("b", &Samples(b))
+            .field("display_max_cd_m2", display_max_cd_m2)
+            .finish()
+    }
 }
 
 impl DisplayImage {
@@ -322,6 +385,32 @@ impl DisplayImage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `Debug` shows each plane's number of samples, not the samples (it printed all of
+    /// them: megabytes of text for a photograph).
+    #[test]
+    fn debug_shows_each_planes_size_not_its_samples() {
+        let (w, h) = (640, 480);
+        let mut hdr = HdrImage::zeros(w, h);
+        hdr.scotopic = Some(vec![1.0; w * h]);
+        let shown = format!("{hdr:?}");
+        assert_eq!(shown.matches("<307200 samples>").count(), 4, "{shown}");
+        assert!(shown.len() < 300 && shown.contains("width: 640"), "{shown}");
+        let display = DisplayImage {
+            width: w,
+            height: h,
+            r: vec![0.5; w * h],
+            g: vec![0.5; w * h],
+            b: vec![0.5; w * h],
+            display_max_cd_m2: 100.0,
+        };
+        let shown = format!("{display:?}");
+        assert_eq!(shown.matches("<307200 samples>").count(), 3, "{shown}");
+        assert!(
+            shown.len() < 200 && shown.contains("display_max_cd_m2: 100.0"),
+            "{shown}"
+        );
+    }
 
     #[test]
     fn with_peak_rescales_the_highest_visible_luminance() {

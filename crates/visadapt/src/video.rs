@@ -89,17 +89,7 @@ pub struct Observer {
     size: Option<(usize, usize)>,
     frames: u64,
     /// The adaptation map of local adaptation, its planes kept from frame to frame.
-    map: KeptMap,
-}
-
-/// The map an [`Observer`] keeps, shown by `Debug` as its size only (not its planes).
-#[derive(Clone, Default)]
-struct KeptMap(AdaptationMap);
-
-impl std::fmt::Debug for KeptMap {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "AdaptationMap({}x{})", self.0.width, self.0.height)
-    }
+    map: AdaptationMap,
 }
 
 /// What the model did with one frame.
@@ -136,7 +126,7 @@ impl Observer {
             state: None,
             size: None,
             frames: 0,
-            map: KeptMap::default(),
+            map: AdaptationMap::default(),
         })
     }
 
@@ -184,7 +174,7 @@ impl Observer {
             &report,
             &state,
             &self.conditions,
-            &mut self.map.0,
+            &mut self.map,
             out,
         )?;
         let t_seconds = self.frames as f64 * self.dt_seconds;
@@ -949,6 +939,23 @@ mod tests {
             );
             assert_eq!(sink.written.into_inner().unwrap().len(), 12);
         }
+    }
+
+    /// An observer of local adaptation shows the map it keeps by its planes' sizes, not
+    /// their samples (the images' and the map's own `Debug`).
+    #[test]
+    fn an_observers_debug_shows_its_maps_size_not_its_samples() {
+        let conditions = ViewingConditions {
+            adaptation: operator::AdaptationMode::Local(crate::local::LocalAdaptation::default()),
+            ..ViewingConditions::default()
+        };
+        let mut eye = Observer::new(conditions, 4.0).unwrap();
+        let (mut hdr, mut out) = (HdrImage::zeros(0, 0), DisplayImage::default());
+        fill(&mut hdr, 1000.0);
+        eye.frame(&hdr, &mut out).unwrap();
+        let shown = format!("{eye:?}");
+        assert!(shown.contains("offset_log: <1152 samples>"), "{shown}");
+        assert!(shown.len() < 4000, "{} characters", shown.len());
     }
 
     #[test]

@@ -72,7 +72,7 @@
 //! the image where the sigmas vary faster.
 
 use crate::acuity::AcuityFilter;
-use crate::image::{Projection, View};
+use crate::image::{Projection, Samples, View};
 use crate::operator::{DEFAULT_FOV_DEG, MIN_BLUR_SIGMA_PX, Report};
 use crate::scotopic;
 use crate::{Error, HdrImage, Result};
@@ -107,7 +107,7 @@ pub const UPSAMPLING_RANGE_LOG: f32 = 0.5;
 /// [`operator::plan`](crate::operator::plan) report (see the module docs).
 ///
 /// The [`Default`] map is empty (no pixels), a start for [`AdaptationMap::compute_into`].
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Clone, Default, PartialEq)]
 pub struct AdaptationMap {
     /// Width in pixels.
     pub width: usize,
@@ -134,7 +134,7 @@ pub struct AdaptationMap {
 }
 
 /// The filter grid: samples `step` pixels apart, row-major.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Clone, Default, PartialEq)]
 pub struct Grid {
     /// Samples per row.
     pub width: usize,
@@ -148,6 +148,62 @@ pub struct Grid {
     pub offset_scotopic_log: Vec<f32>,
     /// Per sample, pixels per degree there (from the view).
     pub pixels_per_degree: Vec<f32>,
+}
+
+/// The map's size, levels, radius and grid, and of each plane its number of samples
+/// (as for the images: [`HdrImage`]'s `Debug`).
+impl std::fmt::Debug for AdaptationMap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let AdaptationMap {
+            width,
+            height,
+            offset_log,
+            offset_scotopic_log,
+            acuity_sigma_px,
+            world_adaptation_cd_m2,
+            world_adaptation_scotopic_cd_m2,
+            radius_deg,
+            grid_step_px,
+            grid,
+        } = self;
+        f.debug_struct("AdaptationMap")
+            .field("width", width)
+            .field("height", height)
+            .field("offset_log", &Samples(offset_log))
+            .field("offset_scotopic_log", &Samples(offset_scotopic_log))
+            .field("acuity_sigma_px", &acuity_sigma_px.as_deref().map(Samples))
+            .field("world_adaptation_cd_m2", world_adaptation_cd_m2)
+            .field(
+                "world_adaptation_scotopic_cd_m2",
+                world_adaptation_scotopic_cd_m2,
+            )
+            .field("radius_deg", radius_deg)
+            .field("grid_step_px", grid_step_px)
+            .field("grid", grid)
+            .finish()
+    }
+}
+
+/// The grid's size, and of each plane its number of samples.
+impl std::fmt::Debug for Grid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let Grid {
+            width,
+            height,
+            guide_log,
+            offset_log,
+            offset_scotopic_log,
+            pixels_per_degree,
+        } = self;
+        f.debug_struct("Grid")
+            .field("width", width)
+            .field("height", height)
+            .field("guide_log", &Samples(guide_log))
+            .field("offset_log", &Samples(offset_log))
+            .field("offset_scotopic_log", &Samples(offset_scotopic_log))
+            .field("pixels_per_degree", &Samples(pixels_per_degree))
+            .finish()
+    }
 }
 
 impl AdaptationMap {
@@ -976,6 +1032,33 @@ fn plane_rows(planes: &mut [Vec<f32>], width: usize) -> Vec<Vec<&mut [f32]>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `Debug` shows each plane's number of samples, not the samples.
+    #[test]
+    fn debug_shows_each_planes_size_not_its_samples() {
+        let (w, h) = (640, 480);
+        let map = AdaptationMap {
+            width: w,
+            height: h,
+            offset_log: vec![-0.5; w * h],
+            offset_scotopic_log: vec![-0.5; w * h],
+            acuity_sigma_px: Some(vec![1.5; w * h]),
+            grid_step_px: 4,
+            grid: Grid {
+                width: w / 4,
+                height: h / 4,
+                guide_log: vec![0.0; w * h / 16],
+                offset_log: vec![0.0; w * h / 16],
+                offset_scotopic_log: vec![0.0; w * h / 16],
+                pixels_per_degree: vec![40.0; w * h / 16],
+            },
+            ..AdaptationMap::default()
+        };
+        let shown = format!("{map:?}");
+        assert_eq!(shown.matches("<307200 samples>").count(), 3, "{shown}");
+        assert_eq!(shown.matches("<19200 samples>").count(), 4, "{shown}");
+        assert!(shown.len() < 700, "{shown}");
+    }
 
     /// The domain transform as first written (serial, one exponential per link and
     /// iteration), the reference the parallel one is pinned to.
