@@ -52,7 +52,7 @@ pub struct HdrImage {
 }
 
 /// The image's size, units, view and white, and of each plane its number of samples
-/// ([`Samples`]).
+/// (not its samples).
 impl std::fmt::Debug for HdrImage {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let HdrImage {
@@ -303,8 +303,8 @@ pub struct DisplayImage {
     pub display_max_cd_m2: f32,
 }
 
-/// The image's size and display maximum, and of each plane its number of samples
-/// ([`Samples`]).
+/// The image's size and display maximum, and of each plane its number of samples (not
+/// its samples).
 impl std::fmt::Debug for DisplayImage {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let DisplayImage {
