@@ -11,8 +11,9 @@
 //! calls them inside a function with the level's target features enabled. The `unsafe`
 //! of the crate is here: the call of that function, after checking that the processor
 //! has the features, and one instruction the compiler does not make of portable code
-//! (a 16-lane permute, [`Avx512::permute16`], for the table look-ups of local
-//! adaptation: 6.7 against 8.0 ms for the 1080p mapping pass, `local_stages/mapping`).
+//! (an 8-lane permute, [`Avx2::permute8`], for the table look-ups of local adaptation:
+//! the 1080p mapping pass took 5.0 ms with it against 8.5 ms with selects, minima of 30
+//! passes, five rounds in turn).
 //! Kernels take a `const FMA: bool` to use [`madd`] with a fused multiply-add only where
 //! the instruction exists (elsewhere `f32::mul_add` would be a slow library call);
 //! results of the two paths differ only in rounding, which the kernels' tests bound.
@@ -167,55 +168,64 @@ impl Isa {
     }
 }
 
-/// Proof that the processor runs AVX-512F, for the one explicit instruction of the
-/// kernels: a lane permute ([`Avx512::permute16`]), which the compiler does not make of
-/// safe code (a per-lane index into a 16-value table becomes a chain of selects or a
-/// gather). Only [`Isa::avx512`] makes one, after detection.
+/// Proof that the processor runs AVX2, for the one explicit instruction of the kernels:
+/// a lane permute ([`Avx2::permute8`]), which the compiler does not make of safe code (a
+/// per-lane index into an 8-value table becomes a chain of selects or a gather). Only
+/// [`Isa::avx2`] makes one, after detection.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Avx512(());
+pub(crate) struct Avx2(());
 
 impl Isa {
-    /// The proof of AVX-512F when this is [`Isa::Avx512Fma`] (the processor has it).
-    pub(crate) fn avx512(self) -> Option<Avx512> {
-        (self == Isa::Avx512Fma && Isa::best() == Isa::Avx512Fma).then_some(Avx512(()))
+    /// The proof of AVX2 when this is [`Isa::Avx2Fma`] (the processor has it).
+    pub(crate) fn avx2(self) -> Option<Avx2> {
+        (self == Isa::Avx2Fma && Isa::best() != Isa::Baseline).then_some(Avx2(()))
+    }
+
+    /// This level, or [`Isa::Avx2Fma`] in place of [`Isa::Avx512Fma`]: for the kernels
+    /// whose AVX2 build measured faster.
+    pub(crate) fn at_most_avx2(self) -> Isa {
+        match self {
+            Isa::Avx512Fma => Isa::Avx2Fma,
+            other => other,
+        }
     }
 }
 
-impl Avx512 {
-    /// `table[index[l]]` for each of the 16 lanes (only the low four bits of an index
-    /// count): one `vpermps`. Inlined into AVX-512 kernels ([`at_level!`]); elsewhere a
-    /// call.
+impl Avx2 {
+    /// `table[index[l]]` for each of the 8 lanes (only the low three bits of an index
+    /// count): one `vpermps` (`vpermilps` permutes only within 128-bit halves). Inlined
+    /// into AVX2 kernels ([`at_level!`]); elsewhere a call.
     #[inline(always)]
-    pub(crate) fn permute16(self, table: &[f32; 16], index: &[u32; 16]) -> [f32; 16] {
+    pub(crate) fn permute8(self, table: &[f32; 8], index: &[u32; 8]) -> [f32; 8] {
         #[cfg(target_arch = "x86_64")]
         {
-            // SAFETY: an `Avx512` exists only when the processor supports AVX-512F
-            // (`Isa::avx512`), all `permute16_avx512` requires.
-            unsafe { permute16_avx512(table, index) }
+            // SAFETY: an `Avx2` exists only when the processor supports AVX2
+            // (`Isa::avx2`), all `permute8_avx2` requires.
+            unsafe { permute8_avx2(table, index) }
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
             let _ = (table, index);
-            unreachable!("AVX-512 is x86-64 only")
+            unreachable!("AVX2 is x86-64 only")
         }
     }
 }
 
-/// [`Avx512::permute16`]'s instruction.
+/// [`Avx2::permute8`]'s instruction.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
+#[target_feature(enable = "avx2")]
 #[inline]
-fn permute16_avx512(table: &[f32; 16], index: &[u32; 16]) -> [f32; 16] {
+fn permute8_avx2(table: &[f32; 8], index: &[u32; 8]) -> [f32; 8] {
     use std::arch::x86_64::{
-        _mm512_loadu_epi32, _mm512_loadu_ps, _mm512_permutexvar_ps, _mm512_storeu_ps,
+        __m256i, _mm256_loadu_ps, _mm256_loadu_si256, _mm256_permutevar8x32_ps, _mm256_storeu_ps,
     };
-    let mut out = [0f32; 16];
-    // SAFETY: the loads read 16 values of `table` and `index` and the store writes 16
-    // of `out`, each an array of exactly 16 (unaligned access is allowed).
+    let mut out = [0f32; 8];
+    // SAFETY: the loads read 8 values of `table` and `index` and the store writes 8 of
+    // `out`, each an array of exactly 8 (unaligned access is allowed).
     unsafe {
-        let t = _mm512_loadu_ps(table.as_ptr());
-        let i = _mm512_loadu_epi32(index.as_ptr().cast());
-        _mm512_storeu_ps(out.as_mut_ptr(), _mm512_permutexvar_ps(i, t));
+        let t = _mm256_loadu_ps(table.as_ptr());
+        let i = _mm256_loadu_si256(index.as_ptr().cast::<__m256i>());
+        _mm256_storeu_ps(out.as_mut_ptr(), _mm256_permutevar8x32_ps(t, i));
     }
     out
 }
