@@ -63,8 +63,10 @@
 //! radius; the full-resolution map is a joint bilateral upsampling (Kopf, Cohen, Lischinski
 //! & Uyttendaele 2007) of the grid, each pixel weighting the four grid samples around it by
 //! distance and by how close their guide is to its own log luminance, so that the map
-//! keeps edges sharp at full resolution. The per-pixel work (block means and upsampling)
-//! is linear in the pixels and flat in the radius; the grid's (the domain transform, in
+//! keeps edges sharp at full resolution. The image is read once: the block means leave
+//! each pixel's log luminance in the map's photopic plane, where the upsampling reads it
+//! as its guide before writing the offset over it. The per-pixel work (block means and
+//! upsampling) is linear in the pixels and flat in the radius; the grid's (the domain transform, in
 //! parallel over its two channels, and one acuity sigma per sample) grows as the radius
 //! shrinks, with the number of samples: about 83,000 at 0.25° on a 1080p frame 20° wide
 //! against 3,900 at 1° and 2,000 from 3° on (the step's cap). So the map is not flat in
@@ -312,8 +314,27 @@ impl AdaptationMap {
         let step = grid_step(radius_deg * centre_ppd);
         let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
 
+        // The map's planes, reused when they can hold the image. The first is written
+        // with each pixel's log photopic luminance by the block means, which the
+        // upsampling reads as its guide and overwrites with the photopic offset.
+        let mut planes = vec![
+            std::mem::take(&mut self.offset_log),
+            std::mem::take(&mut self.offset_scotopic_log),
+        ];
+        let sigma_plane = self.acuity_sigma_px.take();
+        if report.acuity_applied && report.pixels_per_degree.is_some() {
+            planes.push(sigma_plane.unwrap_or_default());
+        }
+        for plane in planes.iter_mut() {
+            if plane.capacity() < w * h {
+                // Zeroed pages from the system, touched first by the parallel passes.
+                *plane = vec![0f32; w * h];
+            } else {
+                plane.resize(w * h, 0.0);
+            }
+        }
         // Block means of the log luminances (the guide is the photopic one).
-        let (guide, scot) = block_log_means(image, step, gw, gh);
+        let (guide, scot) = block_log_means(image, step, gw, gh, &mut planes[0]);
         let ppd = pixels_per_degree_grid(&view, w, h, step);
         let mut phot: Vec<f64> = guide.iter().map(|&v| f64::from(v)).collect();
         let mut scot: Vec<f64> = scot.iter().map(|&v| f64::from(v)).collect();
@@ -385,16 +406,8 @@ impl AdaptationMap {
             pixels_per_degree: ppd,
         };
         let mut channels: Vec<&[f32]> = vec![&grid.offset_log, &grid.offset_scotopic_log];
-        let mut planes = vec![
-            std::mem::take(&mut self.offset_log),
-            std::mem::take(&mut self.offset_scotopic_log),
-        ];
-        let sigma_plane = self.acuity_sigma_px.take();
-        if let Some(s) = &sigma_grid {
-            channels.push(s);
-            planes.push(sigma_plane.unwrap_or_default());
-        }
-        upsample(image, &grid, step, &channels, &mut planes);
+        channels.extend(sigma_grid.as_deref());
+        upsample(w, &grid, step, &channels, &mut planes);
         let mut planes = planes.into_iter();
         *self = AdaptationMap {
             width: w,
@@ -621,36 +634,58 @@ fn log_luminances(image: &HdrImage, start: usize, out_p: &mut [f32], out_s: &mut
 
 /// Block means (`step × step` pixels, smaller at the right and bottom edges) of the log
 /// luminances. A mean of equal values is that value exactly (it is summed as differences
-/// from the block's first pixel).
-fn block_log_means(image: &HdrImage, step: usize, gw: usize, gh: usize) -> (Vec<f32>, Vec<f32>) {
+/// from the block's first pixel). Each pixel's log photopic luminance (the photopic half
+/// of [`log_luminances`]) is written to `log_photopic_px` (one value per pixel) on the
+/// way: the upsampling's guide, read there instead of from the image again.
+fn block_log_means(
+    image: &HdrImage,
+    step: usize,
+    gw: usize,
+    gh: usize,
+    log_photopic_px: &mut [f32],
+) -> (Vec<f32>, Vec<f32>) {
+    assert_eq!(log_photopic_px.len(), image.len(), "a value per pixel");
     let mut guide = vec![0f32; gw * gh];
     let mut scot = vec![0f32; gw * gh];
-    let band = |gy: usize, guide: &mut [f32], scot: &mut [f32]| {
-        widest!(block_band(image, step, gy, guide, scot))
+    let band = |gy: usize, guide: &mut [f32], scot: &mut [f32], lp: &mut [f32]| {
+        widest!(block_band(image, step, gy, guide, scot, lp))
     };
+    let band_px = step * image.width;
     #[cfg(feature = "rayon")]
     {
         use rayon::prelude::*;
         guide
             .par_chunks_mut(gw)
             .zip(scot.par_chunks_mut(gw))
+            .zip(log_photopic_px.par_chunks_mut(band_px))
             .enumerate()
-            .for_each(|(gy, (g, s))| band(gy, g, s));
+            .for_each(|(gy, ((g, s), lp))| band(gy, g, s, lp));
     }
     #[cfg(not(feature = "rayon"))]
     {
-        for (gy, (g, s)) in guide.chunks_mut(gw).zip(scot.chunks_mut(gw)).enumerate() {
-            band(gy, g, s);
+        let bands = guide
+            .chunks_mut(gw)
+            .zip(scot.chunks_mut(gw))
+            .zip(log_photopic_px.chunks_mut(band_px));
+        for (gy, ((g, s), lp)) in bands.enumerate() {
+            band(gy, g, s, lp);
         }
     }
     (guide, scot)
 }
 
-/// Band `gy` of [`block_log_means`]: the means of its `guide.len()` blocks.
+/// Band `gy` of [`block_log_means`]: the means of its `guide.len()` blocks, and its rows'
+/// log photopic luminances into `log_photopic_px`.
 #[inline(always)]
-fn block_band(image: &HdrImage, step: usize, gy: usize, guide: &mut [f32], scot: &mut [f32]) {
+fn block_band(
+    image: &HdrImage,
+    step: usize,
+    gy: usize,
+    guide: &mut [f32],
+    scot: &mut [f32],
+    log_photopic_px: &mut [f32],
+) {
     let (w, h) = (image.width, image.height);
-    let mut row_p = vec![0f32; w];
     let mut row_s = vec![0f32; w];
     // Per column, the sum over the band's rows of the differences from its block's first
     // pixel (independent columns: the loop vectorises), then per block the sum of its
@@ -662,7 +697,8 @@ fn block_band(image: &HdrImage, step: usize, gy: usize, guide: &mut [f32], scot:
     let rows = (gy * step)..((gy + 1) * step).min(h);
     let count_y = rows.len();
     for (k, y) in rows.enumerate() {
-        log_luminances(image, y * w, &mut row_p, &mut row_s);
+        let row_p = &mut log_photopic_px[k * w..][..w];
+        log_luminances(image, y * w, row_p, &mut row_s);
         if k == 0 {
             for x in 0..w {
                 let first = x - x % step;
@@ -848,46 +884,15 @@ pub(crate) fn high_quantile(values: &[f64], fraction: f64) -> f64 {
         .1
 }
 
-/// Per pixel the log10 photopic luminance as the map reads it (the photopic half of
-/// [`log_luminances`], the same values), for pixels `start..start + out.len()`.
-#[inline(always)]
-fn log_photopic(image: &HdrImage, start: usize, out: &mut [f32]) {
-    let end = start + out.len();
-    let (xs, ys, zs) = (
-        &image.x[start..end],
-        &image.y[start..end],
-        &image.z[start..end],
-    );
-    let finite3 = |j: usize| xs[j].is_finite() & ys[j].is_finite() & zs[j].is_finite();
-    match &image.scotopic {
-        Some(s) => {
-            let s = &s[start..end];
-            for (j, o) in out.iter_mut().enumerate() {
-                *o = fast_log10(clean(ys[j], finite3(j) & s[j].is_finite()));
-            }
-        }
-        None => {
-            for (j, o) in out.iter_mut().enumerate() {
-                *o = fast_log10(clean(ys[j], finite3(j)));
-            }
-        }
-    }
-}
-
 /// Joint bilateral upsampling of grid `channels` to every pixel (module docs) into
-/// `planes` (one per channel, each reused if it can hold the image: every sample is
-/// written), row by row (no interleaved copy). Along a row the grid samples change
-/// every `step` pixels; each run of pixels between the same four samples is computed
-/// with those samples held, so the loops vectorise.
-fn upsample(
-    image: &HdrImage,
-    grid: &Grid,
-    step: usize,
-    channels: &[&[f32]],
-    planes: &mut [Vec<f32>],
-) {
-    let (w, h) = (image.width, image.height);
-    let n = w * h;
+/// `planes` (one per channel, rows of `w` pixels; every sample is written), row by row
+/// (no interleaved copy). The first plane holds each pixel's log photopic luminance on
+/// entry (the guide: [`block_log_means`] writes it there), read before it is
+/// overwritten. Along a row the grid samples change every `step`
+/// pixels; each run of pixels between the same four samples is computed with those
+/// samples held, so the loops vectorise.
+fn upsample(w: usize, grid: &Grid, step: usize, channels: &[&[f32]], planes: &mut [Vec<f32>]) {
+    let h = planes.first().map_or(0, |p| p.len() / w.max(1));
     let (gw, gh) = (grid.width, grid.height);
     // Grid coordinates of a pixel centre: sample k's centre is at (k + 1/2)·step.
     let grid_pos = |p: usize, samples: usize| {
@@ -907,18 +912,13 @@ fn upsample(
         }
     }
     assert_eq!(planes.len(), channels.len(), "one plane per channel");
-    for plane in planes.iter_mut() {
-        if plane.capacity() < n {
-            // Zeroed pages from the system, touched first by the parallel rows below.
-            *plane = vec![0f32; n];
-        } else {
-            plane.resize(n, 0.0);
-        }
+    for plane in planes.iter() {
+        assert_eq!(plane.len(), w * h, "planes of one size");
     }
     let mut rows = plane_rows(planes, w);
     let row_fn = |y: usize, row: &mut [&mut [f32]]| {
         let at = grid_pos(y, gh);
-        widest!(upsample_row(image, grid, channels, &runs, &tx, y, at, row))
+        widest!(upsample_row(grid, channels, &runs, &tx, at, row))
     };
     #[cfg(feature = "rayon")]
     {
@@ -939,31 +939,26 @@ fn upsample(
 /// ([`MAX_GRID_STEP_PX`]), so that a piece's weights fit in fixed arrays.
 const UPSAMPLE_PIECE: usize = MAX_GRID_STEP_PX;
 
-/// Row `y` of [`upsample`] into `row` (one slice per channel): `runs` of columns between
-/// the same two grid columns `(x0, x1, first column, end)`, `tx` per column the weight of
-/// the right-hand samples, `(y0, y1, ty)` the grid rows around the row and the weight of
-/// the lower one. Run by run (in pieces of at most [`UPSAMPLE_PIECE`] pixels), the four
-/// taps' weights are computed once for all channels, and each channel's four values are
-/// held in registers: nothing is spread over the row first.
-#[allow(clippy::too_many_arguments)]
+/// A row of [`upsample`] into `row` (one slice per channel, the first holding the row's
+/// log photopic luminances on entry): `runs` of columns between the same two grid
+/// columns `(x0, x1, first column, end)`, `tx` per column the weight of the right-hand
+/// samples, `(y0, y1, ty)` the grid rows around the row and the weight of the lower one.
+/// Run by run (in pieces of at most [`UPSAMPLE_PIECE`] pixels), the four taps' weights
+/// are computed once for all channels (from the piece's luminances, before the piece is
+/// written), and each channel's four values are held in registers: nothing is spread
+/// over the row first.
 #[inline(always)]
 fn upsample_row(
-    image: &HdrImage,
     grid: &Grid,
     channels: &[&[f32]],
     runs: &[(usize, usize, usize, usize)],
     tx: &[f32],
-    y: usize,
     (y0, y1, ty): (usize, usize, f32),
     row: &mut [&mut [f32]],
 ) {
     const P: usize = UPSAMPLE_PIECE;
-    let w = image.width;
     let gw = grid.width;
     let inv_range = 1.0 / UPSAMPLING_RANGE_LOG;
-    // The pixels' log luminance.
-    let mut lp = vec![0f32; w];
-    log_photopic(image, y * w, &mut lp);
     let taps = |x0: usize, x1: usize| [y0 * gw + x0, y0 * gw + x1, y1 * gw + x0, y1 * gw + x1];
     let mut weights = [[0f32; P]; 4];
     let mut sum = [0f32; P];
@@ -973,7 +968,8 @@ fn upsample_row(
         for from in (start..end).step_by(P) {
             let to = end.min(from + P);
             let m = to - from;
-            let (lp, tx) = (&lp[from..to], &tx[from..to]);
+            // The piece's luminances, read before the piece of the first plane is written.
+            let (lp, tx) = (&row[0][from..to], &tx[from..to]);
             for x in 0..m {
                 let t = tx[x];
                 let bilinear = [
@@ -1032,6 +1028,31 @@ fn plane_rows(planes: &mut [Vec<f32>], width: usize) -> Vec<Vec<&mut [f32]>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Per pixel the log10 photopic luminance as the map reads it, written on its own: the
+    /// reference for the photopic half of [`log_luminances`] (the same values), for pixels `start..start + out.len()`.
+    fn log_photopic(image: &HdrImage, start: usize, out: &mut [f32]) {
+        let end = start + out.len();
+        let (xs, ys, zs) = (
+            &image.x[start..end],
+            &image.y[start..end],
+            &image.z[start..end],
+        );
+        let finite3 = |j: usize| xs[j].is_finite() & ys[j].is_finite() & zs[j].is_finite();
+        match &image.scotopic {
+            Some(s) => {
+                let s = &s[start..end];
+                for (j, o) in out.iter_mut().enumerate() {
+                    *o = fast_log10(clean(ys[j], finite3(j) & s[j].is_finite()));
+                }
+            }
+            None => {
+                for (j, o) in out.iter_mut().enumerate() {
+                    *o = fast_log10(clean(ys[j], finite3(j)));
+                }
+            }
+        }
+    }
 
     /// `Debug` shows each plane's number of samples, not the samples.
     #[test]
@@ -1184,16 +1205,23 @@ mod tests {
         image.y[5] = f32::NAN;
         for step in [1usize, 3, 8, 23] {
             let (gw, gh) = (w.div_ceil(step), h.div_ceil(step));
-            let (g, s) = block_log_means(&image, step, gw, gh);
+            let mut lp = vec![f32::NAN; w * h];
+            let (g, s) = block_log_means(&image, step, gw, gh, &mut lp);
             let (rg, rs) = reference_block_log_means(&image, step, gw, gh);
             for (a, b) in g.iter().zip(&rg).chain(s.iter().zip(&rs)) {
                 let ulp = f32::EPSILON * a.abs().max(b.abs()).max(f32::MIN_POSITIVE);
                 assert!((a - b).abs() <= ulp, "step {step}: {a} {b}");
             }
+            // Each pixel's log photopic luminance, written on the way, bit for bit.
+            let mut want = vec![0f32; w * h];
+            log_photopic(&image, 0, &mut want);
+            for (i, (a, b)) in lp.iter().zip(&want).enumerate() {
+                assert_eq!(a.to_bits(), b.to_bits(), "step {step}: pixel {i}");
+            }
         }
         let mut uniform = HdrImage::zeros(40, 30);
         uniform.y.fill(0.37);
-        let (g, _) = block_log_means(&uniform, 7, 6, 5);
+        let (g, _) = block_log_means(&uniform, 7, 6, 5, &mut vec![0.0; 40 * 30]);
         assert!(g.iter().all(|&v| v == fast_log10(0.37)));
     }
 
@@ -1300,8 +1328,11 @@ mod tests {
                     pixels_per_degree: Vec::new(),
                 };
                 let channels: [&[f32]; 2] = [&a, &b];
-                let mut got = vec![Vec::new(); channels.len()];
-                upsample(&image, &grid, step, &channels, &mut got);
+                // The first plane holds the pixels' log luminances, as the block means
+                // leave them.
+                let mut got = vec![vec![0f32; w * h]; channels.len()];
+                block_log_means(&image, step, gw, gh, &mut got[0]);
+                upsample(w, &grid, step, &channels, &mut got);
                 let want = reference_upsample(&image, &grid, step, &channels);
                 for (g, r) in got.iter().zip(&want) {
                     assert!(
