@@ -1892,6 +1892,7 @@ mod tests {
 
     /// Decode `bytes` with the serial decoder and with the parallel one: both must give
     /// the same image bit for bit, or the same error.
+    #[cfg(feature = "rayon")]
     fn serial_and_parallel(bytes: &[u8]) -> Result<HdrImage> {
         let run = |parallel| {
             let mut image = HdrImage::zeros(0, 0);
@@ -1920,6 +1921,7 @@ mod tests {
 
     /// `w × h` pseudo-random pixels with runs of equal components (so that run-length
     /// scanlines hold both runs and literals), some black, and no `1 1 1` or `2 2` pixels.
+    #[cfg(feature = "rayon")]
     fn varied_pixels(w: usize, h: usize, seed: u64) -> Vec<[u8; 4]> {
         let mut rand = lcg(seed);
         let mut next = || rand() as u8;
@@ -1938,6 +1940,7 @@ mod tests {
 
     /// The `2 + h`-offset scanline data of `px` (`w` wide) in the row order of a
     /// resolution line `-Y`/`+Y` and column order `+X`/`-X`, every row encoded by `enc`.
+    #[cfg(feature = "rayon")]
     fn scanlines(
         px: &[[u8; 4]],
         w: usize,

@@ -332,15 +332,17 @@ fn region_levels(
         let blur_region = |scratch: &mut Vec<f32>, region: &Region| {
             let [x0, x1, y0, y1] = region.crop;
             let (cw, ch) = (x1 - x0, y1 - y0);
-            scratch.clear();
             if crate::blur::uses_exact_kernel(sigma, cw, ch) {
-                // The pass writes every sample of its output.
-                scratch.resize(cw * ch, 0.0);
+                // The pass writes every sample of its output: the buffer only grows, it
+                // is not cleared for each region.
+                if scratch.len() < cw * ch {
+                    scratch.resize(cw * ch, 0.0);
+                }
                 crate::blur::exact_pass(
                     sigma,
                     cw,
                     ch,
-                    [scratch.as_mut_slice()],
+                    [&mut scratch[..cw * ch]],
                     false,
                     |y, _, [row]| row.copy_from_slice(&source[(y0 + y) * width + x0..][..cw]),
                     |y, [row]| add_row(region, j, y0 + y, row),
@@ -349,6 +351,7 @@ fn region_levels(
                 return;
             }
             // Exactly the rectangle (no growth beyond it).
+            scratch.clear();
             scratch.reserve_exact(cw * ch);
             for y in y0..y1 {
                 scratch.extend_from_slice(&source[y * width + x0..y * width + x1]);

@@ -66,9 +66,9 @@
 //! keeps edges sharp at full resolution. The image is read once: the block means leave
 //! each pixel's log luminance in the map's photopic plane, where the upsampling reads it
 //! as its guide before writing the offset over it. The per-pixel work (block means and
-//! upsampling) is linear in the pixels and flat in the radius; the grid's (the domain transform, in
-//! parallel over its two channels, and one acuity sigma per sample) grows as the radius
-//! shrinks, with the number of samples: about 83,000 at 0.25° on a 1080p frame 20° wide
+//! upsampling) is linear in the pixels and flat in the radius; the grid's (the domain
+//! transform, in parallel over its two channels, and one acuity sigma per sample) grows
+//! as the radius shrinks, with the number of samples: about 83,000 at 0.25° on a 1080p frame 20° wide
 //! against 3,900 at 1° and 2,000 from 3° on (the step's cap). So the map is not flat in
 //! the radius at small radii; neither is the acuity stage, whose blurs cover more of
 //! the image where the sigmas vary faster.
@@ -321,8 +321,11 @@ impl AdaptationMap {
             std::mem::take(&mut self.offset_log),
             std::mem::take(&mut self.offset_scotopic_log),
         ];
+        // The acuity sigmas need the view's pixels per degree (the same rule as the global
+        // operator's).
+        let acuity_ppd = report.pixels_per_degree.filter(|_| report.acuity_applied);
         let sigma_plane = self.acuity_sigma_px.take();
-        if report.acuity_applied && report.pixels_per_degree.is_some() {
+        if acuity_ppd.is_some() {
             planes.push(sigma_plane.unwrap_or_default());
         }
         for plane in planes.iter_mut() {
@@ -351,8 +354,8 @@ impl AdaptationMap {
         let offset_scotopic_grid: Vec<f32> = scot.iter().map(|&v| (v - qs) as f32).collect();
         // The acuity Gaussian of each sample's adaptation (Eq. 7), in pixels by the same rule
         // as the global operator (pixels per degree at the centre, capped at the image size).
-        let sigma_grid: Option<Vec<f32>> = match (report.acuity_applied, report.pixels_per_degree) {
-            (true, Some(ppd)) => {
+        let sigma_grid: Option<Vec<f32>> = match acuity_ppd {
+            Some(ppd) => {
                 let (lwa, lwa_s) = (
                     report.world_adaptation_cd_m2,
                     report.world_adaptation_scotopic_cd_m2,
@@ -395,7 +398,7 @@ impl AdaptationMap {
                     .for_each(piece);
                 Some(sigmas)
             }
-            _ => None,
+            None => None,
         };
         let grid = Grid {
             width: gw,

@@ -625,8 +625,9 @@ fn map_chunk(
 ) -> PixelStats {
     // The AVX2 build also where the processor has AVX-512: on this project's machine
     // (Zen 4, whose 512-bit operations are two 256-bit halves) the AVX-512 build of the
-    // pass took 6.0 ms at 1080p against 4.8-5.0 ms for the AVX2 one (minima of 30
-    // passes, three rounds in turn), with either width of permute.
+    // pass took 6.0 ms at 1080p against 4.8-5.0 ms for the AVX2 one (a scratch timing of
+    // local `apply` without acuity, minima of 30 passes, three rounds in turn), with
+    // either width of permute (see the performance log).
     let isa = Isa::detect().at_most_avx2();
     let permute = isa.avx2();
     crate::simd::at_level!(
