@@ -532,7 +532,7 @@ pub fn compare(
 }
 
 /// The difference between two images in JNDs, per pixel and summarised.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct Difference {
     /// Width in pixels.
     pub width: usize,
@@ -549,6 +549,31 @@ pub struct Difference {
     /// Pixels with a NaN or infinite channel, counted in each image (read as black, as the
     /// operator shows them).
     pub non_finite_pixels: usize,
+}
+
+/// The size and the summary, and of the per-pixel plane its number of samples (as for
+/// the images: [`HdrImage`]'s `Debug`).
+impl std::fmt::Debug for Difference {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let Difference {
+            width,
+            height,
+            jnd,
+            visible_fraction,
+            mean_jnd,
+            max_jnd,
+            non_finite_pixels,
+        } = self;
+        f.debug_struct("Difference")
+            .field("width", width)
+            .field("height", height)
+            .field("jnd", &crate::image::Samples(jnd))
+            .field("visible_fraction", visible_fraction)
+            .field("mean_jnd", mean_jnd)
+            .field("max_jnd", max_jnd)
+            .field("non_finite_pixels", non_finite_pixels)
+            .finish()
+    }
 }
 
 impl Difference {
@@ -869,6 +894,26 @@ fn par_chunks2(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `Debug` shows the summary and the per-pixel plane's size, not its samples.
+    #[test]
+    fn debug_shows_the_summary_and_the_planes_size() {
+        let d = Difference {
+            width: 640,
+            height: 480,
+            jnd: vec![0.5; 640 * 480],
+            visible_fraction: 0.25,
+            mean_jnd: 0.5,
+            max_jnd: 3.0,
+            non_finite_pixels: 0,
+        };
+        let shown = format!("{d:?}");
+        assert!(shown.contains("jnd: <307200 samples>"), "{shown}");
+        assert!(
+            shown.contains("max_jnd: 3.0") && shown.len() < 250,
+            "{shown}"
+        );
+    }
 
     #[test]
     fn pooling_is_the_envelope_for_one_system_and_sums_two_at_threshold() {
