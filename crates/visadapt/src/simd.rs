@@ -69,7 +69,8 @@ pub(crate) enum Isa {
     /// AVX-512 (foundation) with fused multiply-add: sixteen lanes per vector (x86-64
     /// only). The same operations as [`Isa::Avx2Fma`], so the same results bit for bit;
     /// used by the exact-kernel blur (the recursive filter runs its AVX2 build here: its
-    /// 32 lanes are exactly the four AVX2 vectors that hide each step's latency).
+    /// 32 lanes are exactly the four AVX2 vectors that hide each step's latency; so does
+    /// local adaptation's mapping pass, measured faster: [`Isa::at_most_avx2`]).
     Avx512Fma,
 }
 
