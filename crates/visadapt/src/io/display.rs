@@ -37,7 +37,7 @@ pub(crate) fn srgb8_into(image: &DisplayImage, out: &mut Vec<u8>) {
     });
 }
 
-/// Interleaved sRGB-encoded samples, 16 bits per channel (see [`SrgbLut`]), big-endian
+/// Interleaved sRGB-encoded samples, 16 bits per channel (see [`SrgbLut`](crate::colour::SrgbLut)), big-endian
 /// (PNG's order) or little-endian, into `out` (its contents replaced, its memory reused),
 /// encoded in parallel.
 pub(crate) fn srgb16_into(image: &DisplayImage, big_endian: bool, out: &mut Vec<u8>) {

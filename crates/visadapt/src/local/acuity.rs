@@ -632,8 +632,8 @@ impl Tiles {
 }
 
 /// `out += w_j(σ)·level` per pixel (where the weight is not 0), with the weights of
-/// [`weight`] in a branch-free form the compiler vectorises (the same operations, so the
-/// same values; tested).
+/// `weight` (the tests' reference) in a branch-free form the compiler vectorises (the
+/// same operations, so the same values; tested).
 fn accumulate(out: &mut [f32], level: &[f32], levels: &[f32], j: usize, sigma_px: &[f32]) {
     widest!(accumulate_kernel(out, level, levels, j, sigma_px))
 }
