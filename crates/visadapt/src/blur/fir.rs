@@ -215,8 +215,9 @@ impl<const P: usize> Segment<'_, P> {
 
 /// Run one segment of an exact pass: every input row its outputs need (the segment's
 /// rows and `r` beyond each end, the boundary replicated) is produced by
-/// `fill(y, prior, rows)` into the middle of a padded row and convolved along the row
-/// into a ring of `2r + GROUP` rows; each group of [`GROUP`] output rows is then the
+/// `fill(y, prior, rows)` into the middle of a padded row, or with `direct` read where it
+/// is (no copy; `fill` is not called), and convolved along the row into a ring of
+/// `2r + GROUP` rows; each group of [`GROUP`] output rows is then the
 /// convolution down the ring, a [`COLUMN_BLOCK`] of columns at a time for all rows of
 /// the group, written to the segment's rows and handed to `finish` row by row. `prior`
 /// is row `y`'s content before the pass when `in_place`, empty slices otherwise. Returns
@@ -236,6 +237,7 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
     height: usize,
     in_place: bool,
     mut seg: Segment<'_, P>,
+    direct: Option<&Direct<'_, P>>,
     fill: &impl Fn(usize, [&[f32]; P], [&mut [f32]; P]) -> S,
     finish: &impl Fn(usize, [&mut [f32]; P]) -> S,
     add: &impl Fn(S, S) -> S,
@@ -262,11 +264,19 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
         while next <= (o + count - 1 + r).min(height - 1) {
             let y = next;
             next += 1;
+            let slot = y % m;
+            if let Some(d) = direct {
+                for (p, source) in d.planes.iter().enumerate() {
+                    let dst = &mut ring[(p * m + slot) * stride..][..w];
+                    let row = &source[y * d.stride..][..d.stride];
+                    d.convolve::<FMA, L>(half, dst, row, pad);
+                }
+                continue;
+            }
             let s = seg.fill_padded(y, w, in_place, pad, padded, r, fill);
             if (a..b).contains(&y) {
                 acc = add(acc, s);
             }
-            let slot = y % m;
             for (p, row) in pad.chunks_exact_mut(padded).enumerate() {
                 let dst = &mut ring[(p * m + slot) * stride..][..w];
                 if w > 1 {
@@ -320,6 +330,67 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
     }
     scratch.give_back();
     acc
+}
+
+/// The input rows of a [`segment`] read where they are: row `y` of plane `p` is
+/// `planes[p][y * stride..][..stride]`, and the segment's column `i` is its column `x0 + i`
+/// (the segment's width of columns from `x0`, inside the row). Along the row the blur
+/// reads the row's own samples beyond the segment's columns, and replicates its first and
+/// last samples past its ends, so each output is the whole row's blur.
+pub(crate) struct Direct<'a, const P: usize> {
+    pub(crate) planes: [&'a [f32]; P],
+    pub(crate) stride: usize,
+    pub(crate) x0: usize,
+}
+
+impl<const P: usize> Direct<'_, P> {
+    /// `dst[i]`, the blur along `row` (one row of a plane, `stride` samples) at its column
+    /// `x0 + i`: read in place where the kernel stays inside the row, from a copy with the
+    /// row's end samples replicated (in `pad`, at least `dst.len() + 2r` samples) within
+    /// `r` of its ends. Each sample through [`tap_sum`]'s operations, as in [`segment`]'s
+    /// padded rows (the same values; a row of one sample is not filtered).
+    #[inline(always)]
+    fn convolve<const FMA: bool, const L: usize>(
+        &self,
+        half: &[f32],
+        dst: &mut [f32],
+        row: &[f32],
+        pad: &mut [f32],
+    ) {
+        let (r, x0, w, n) = (half.len() - 1, self.x0, dst.len(), row.len());
+        if n == 1 {
+            dst.fill(row[0]);
+            return;
+        }
+        // Outputs `lo..hi` read only samples of the row: `x0 + i − r ≥ 0` and
+        // `x0 + i + r < n`.
+        let lo = r.saturating_sub(x0).min(w);
+        let hi = n.saturating_sub(r + x0).clamp(lo, w);
+        convolve::<FMA, L>(
+            half,
+            &mut dst[lo..hi],
+            |i, d| (x0 + lo + i).wrapping_add_signed(d),
+            row,
+        );
+        // The outputs near an end: the samples they read, the row's ends replicated.
+        let last = (n - 1) as isize;
+        for (from, to) in [(0, lo), (hi, w)] {
+            if from == to {
+                continue;
+            }
+            let count = to - from + 2 * r;
+            for (k, v) in pad[..count].iter_mut().enumerate() {
+                let at = (x0 + from + k) as isize - r as isize;
+                *v = row[at.clamp(0, last) as usize];
+            }
+            convolve::<FMA, L>(
+                half,
+                &mut dst[from..to],
+                |i, d| (i + r).wrapping_add_signed(d),
+                &pad[..count],
+            );
+        }
+    }
 }
 
 /// Output rows of one tile of [`column_tiles`].

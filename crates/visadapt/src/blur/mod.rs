@@ -422,40 +422,58 @@ pub(crate) fn exact_half_kernel(sigma_px: f32, width: usize, height: usize) -> O
     effective_sigma(sigma_px).map(fir::half_kernel)
 }
 
-/// Some rows of the exact-kernel blur of a `width × height` plane with the kernel `half`
-/// ([`exact_half_kernel`]), on the calling thread: rows `start..start + out.len() / width`
-/// of the blur are written to `out`, input row `y` (for the rows they reach, `start − r`
-/// to the end's `+ r`, the boundary replicated) being written by `fill(y, row)`. The rows
-/// equal those of [`gaussian_blur`] over the whole plane bit for bit (the same operations
-/// in the same order; tested), so a plane can be blurred band by band, or a level of the
-/// spatially varying blur ([`crate::local::acuity`]) only over the rows and columns it is
-/// used in.
+/// Some rows and columns of the exact-kernel blur of a `width × height` plane with the
+/// kernel `half` ([`exact_half_kernel`]), on the calling thread: rows
+/// `start..start + out.len() / cols.len()` of the blur, columns `cols`, are written to
+/// `out` (rows of `cols.len()` samples), reading `plane` in place (the rows and columns
+/// the kernel reaches around them, the boundary replicated; nothing is copied but the
+/// samples within the kernel's radius of the plane's left and right edges). The samples
+/// equal those of [`gaussian_blur`] over the whole plane bit for bit (the same
+/// operations in the same order; tested), so a plane can be blurred band by band, or a
+/// level of the spatially varying blur ([`crate::local::acuity`]) only over the rows and
+/// columns it is used in.
 ///
 /// # Panics
-/// If `out` is not whole rows inside the plane, or `half` is empty.
+/// If `plane` is not `width × height` samples, `cols` is empty or not inside a row,
+/// `out` is not whole rows of `cols.len()` inside the plane, or `half` is empty.
 pub(crate) fn exact_rows(
     half: &[f32],
+    plane: &[f32],
     width: usize,
     height: usize,
     start: usize,
+    cols: std::ops::Range<usize>,
     out: &mut [f32],
-    fill: impl Fn(usize, &mut [f32]),
 ) {
+    let cw = cols.len();
     assert!(!half.is_empty(), "exact_rows: an empty kernel");
+    assert_eq!(
+        plane.len(),
+        width * height,
+        "exact_rows: a plane of width × height"
+    );
     assert!(
-        out.len().is_multiple_of(width) && start + out.len() / width <= height,
-        "exact_rows: {} samples from row {start} are not rows of {width}×{height}",
+        cw > 0 && cols.end <= width,
+        "exact_rows: columns {cols:?} of a row of {width}"
+    );
+    assert!(
+        out.len().is_multiple_of(cw) && start + out.len() / cw <= height,
+        "exact_rows: {} samples from row {start} are not rows of {cw} columns of {height}",
         out.len()
     );
     if out.is_empty() {
         return;
     }
-    let fill = |y: usize, _: [&[f32]; 1], [row]: [&mut [f32]; 1]| fill(y, row);
+    let direct = fir::Direct {
+        planes: [plane],
+        stride: width,
+        x0: cols.start,
+    };
     macro_rules! segment {
         ($fma:literal, $lanes:expr) => {
             fir::segment::<$fma, { $lanes }, 1, ()>(
                 half,
-                width,
+                cw,
                 height,
                 false,
                 fir::Segment {
@@ -464,7 +482,8 @@ pub(crate) fn exact_rows(
                     above: (0, [Vec::new()]),
                     below: [Vec::new()],
                 },
-                &fill,
+                Some(&direct),
+                &|_, _, _| (),
                 &|_, _| (),
                 &|(), ()| (),
                 (),
@@ -534,6 +553,7 @@ impl Finite {
                 height,
                 in_place,
                 seg,
+                None,
                 fill,
                 finish,
                 add,
@@ -903,7 +923,8 @@ mod tests {
 
     /// Rows of the exact kernel's blur computed band by band ([`exact_rows`]) are the
     /// whole-plane blur's bit for bit, for bands at the top, inside and at the bottom, of
-    /// one row or many, on a plane with a 10⁶:1 range.
+    /// one row or many, of whole rows or some columns (at an edge or inside), on a plane
+    /// with a 10⁶:1 range.
     #[test]
     fn exact_rows_are_the_whole_plane_blur_bit_for_bit() {
         let (w, h) = (83, 71);
@@ -921,16 +942,31 @@ mod tests {
             gaussian_blur(&mut whole, w, h, sigma);
             let half = exact_half_kernel(sigma, w, h).expect("the exact kernel");
             for (start, rows) in [(0, 1), (0, 17), (5, 1), (20, 33), (50, 21), (70, 1), (0, h)] {
-                let mut out = vec![f32::NAN; rows * w];
-                exact_rows(&half, w, h, start, &mut out, |y, row| {
-                    row.copy_from_slice(&src[y * w..(y + 1) * w]);
-                });
-                for (k, (a, b)) in out.iter().zip(&whole[start * w..]).enumerate() {
-                    assert_eq!(
-                        a.to_bits(),
-                        b.to_bits(),
-                        "σ {sigma}, rows {start}+{rows}: sample {k}: {a} {b}"
-                    );
+                // Columns: whole rows, at either edge (within a radius of it and not),
+                // inside, one column, a block and a vector wide.
+                for cols in [
+                    0..w,
+                    0..3,
+                    0..40,
+                    2..83,
+                    30..83,
+                    40..41,
+                    9..74,
+                    11..19,
+                    1..2,
+                ] {
+                    let cw = cols.len();
+                    let mut out = vec![f32::NAN; rows * cw];
+                    exact_rows(&half, &src, w, h, start, cols.clone(), &mut out);
+                    for (k, a) in out.iter().enumerate() {
+                        let (y, x) = (start + k / cw, cols.start + k % cw);
+                        let b = whole[y * w + x];
+                        assert_eq!(
+                            a.to_bits(),
+                            b.to_bits(),
+                            "σ {sigma}, rows {start}+{rows}, columns {cols:?}: ({x}, {y}): {a} {b}"
+                        );
+                    }
                 }
             }
         }

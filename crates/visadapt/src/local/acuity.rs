@@ -203,8 +203,9 @@ const BAND_ROWS: usize = TILE_PX / 2;
 /// [`crate::blur::MULTIRATE_MIN_SIGMA_PX`]), blurred from `source` and added into `plane`,
 /// whose pixels not blurred keep their values and the others start at 0: in parallel over
 /// bands of [`BAND_ROWS`] rows, each blurring and adding its levels in their order, every
-/// level only over the band's rows and the runs of tiles that take it (with the kernel's
-/// radius of columns and rows around them, read from `source`). Each blurred sample is
+/// level only over the band's rows and the runs of adjacent tiles that take it (reading
+/// the kernel's radius of columns and rows around them in `source`, where they are:
+/// nothing is copied, and no column outside a run is blurred). Each blurred sample is
 /// the whole-plane blur's bit for bit ([`crate::blur::exact_rows`]) and each pixel takes
 /// its levels in the same order, so the result is that of blurring each level over
 /// regions, one level after the other; but the band's rows of `plane` and `sigma_px`
@@ -237,24 +238,20 @@ fn banded_levels(
         };
         let end = (last + 1).min(exact);
         for (j, half) in kernels.iter().enumerate().take(end).skip(first) {
-            let r = half.len() - 1;
-            for [x0, x1] in tiles.runs(ty, j, r) {
-                let (c0, c1) = (x0.saturating_sub(r), (x1 + r).min(width));
-                let cw = c1 - c0;
+            for [x0, x1] in tiles.runs(ty, j, 0) {
+                let cw = x1 - x0;
                 // Every sample is written by the blur: the buffer only grows, it is not
                 // cleared for each run.
                 if buf.len() < cw * rows {
                     buf.resize(cw * rows, 0.0);
                 }
                 let buf = &mut buf[..cw * rows];
-                crate::blur::exact_rows(half, cw, height, y0, buf, |y, row| {
-                    row.copy_from_slice(&source[y * width + c0..][..cw]);
-                });
+                crate::blur::exact_rows(half, source, width, height, y0, x0..x1, buf);
                 for (k, blurred) in buf.chunks_exact(cw).enumerate() {
                     let at = k * width;
                     accumulate(
                         &mut out[at + x0..at + x1],
-                        &blurred[x0 - c0..x1 - c0],
+                        blurred,
                         levels,
                         j,
                         &sig[at + x0..at + x1],
