@@ -855,7 +855,7 @@ pub fn apply_into(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -
         return apply_staged(image, mapping, out);
     };
     let c = Coefficients::new(mapping);
-    let planes = display_planes(out, w, h, mapping.display_max_cd_m2);
+    let planes = display_planes(out, w, h, mapping.display_max_cd_m2).map(|p| p.as_mut_slice());
     let isa = Isa::detect();
     // Mapping, blur and clipping in one pass over the rows.
     crate::blur::exact_pass(
@@ -895,7 +895,7 @@ fn apply_staged(image: &HdrImage, mapping: &Mapping, out: &mut DisplayImage) -> 
         ];
         map_chunk(&c, xyz, scotopic, r, g, b)
     });
-    blur_and_clip(stats, r, g, b, blur)
+    blur_and_clip(stats, [r, g, b], blur)
 }
 
 /// The display planes of `out`, sized for a `width × height` image on a display of
@@ -906,7 +906,7 @@ pub(crate) fn display_planes(
     width: usize,
     height: usize,
     display_max_cd_m2: f64,
-) -> [&mut [f32]; 3] {
+) -> [&mut Vec<f32>; 3] {
     out.width = width;
     out.height = height;
     out.display_max_cd_m2 = display_max_cd_m2 as f32;
@@ -920,7 +920,7 @@ pub(crate) fn display_planes(
         } else {
             plane.resize(n, 0.0);
         }
-        plane.as_mut_slice()
+        plane
     })
 }
 
@@ -971,16 +971,15 @@ pub(crate) fn map_in_place(
 }
 
 /// The stages after the [`map_pass`]: the acuity `blur` and the clipping after it (none:
-/// the map pass clipped).
+/// the map pass clipped). The blur is handed the planes themselves, so it may exchange
+/// their memory (the spatially varying one does: [`crate::local::acuity`]).
 pub(crate) fn blur_and_clip(
     mut stats: PixelStats,
-    r: &mut [f32],
-    g: &mut [f32],
-    b: &mut [f32],
-    blur: Option<impl FnOnce(&mut [&mut [f32]])>,
+    [r, g, b]: [&mut Vec<f32>; 3],
+    blur: Option<impl FnOnce([&mut Vec<f32>; 3])>,
 ) -> PixelStats {
     if let Some(blur) = blur {
-        blur(&mut [&mut *r, &mut *g, &mut *b]);
+        blur([&mut *r, &mut *g, &mut *b]);
         stats.clipped = par_chunks(r, g, b, |_, r, g, b| clip_chunk(r, g, b)).clipped;
     }
     stats
@@ -1001,10 +1000,11 @@ fn acuity_blur(
     mapping: &Mapping,
     width: usize,
     height: usize,
-) -> Option<impl FnOnce(&mut [&mut [f32]]) + use<>> {
+) -> Option<impl FnOnce([&mut Vec<f32>; 3]) + use<>> {
     let sigma = mapping.blur_sigma_px;
-    (sigma > 0.0).then_some(move |planes: &mut [&mut [f32]]| {
-        crate::blur::gaussian_blur_planes(planes, width, height, sigma as f32)
+    (sigma > 0.0).then_some(move |planes: [&mut Vec<f32>; 3]| {
+        let mut planes = planes.map(|p| p.as_mut_slice());
+        crate::blur::gaussian_blur_planes(&mut planes, width, height, sigma as f32)
     })
 }
 
@@ -1052,7 +1052,7 @@ pub fn apply_owned(image: HdrImage, mapping: &Mapping) -> (DisplayImage, PixelSt
         })
     });
     drop(scotopic);
-    let stats = blur_and_clip(stats, &mut r, &mut g, &mut b, blur);
+    let stats = blur_and_clip(stats, [&mut r, &mut g, &mut b], blur);
     (display(r, g, b), stats)
 }
 

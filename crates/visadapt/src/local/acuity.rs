@@ -138,59 +138,107 @@ pub fn varying_gaussian_blur(
     height: usize,
     sigma_px: &[f32],
 ) {
-    let n = width * height;
-    assert_eq!(sigma_px.len(), n, "one sigma per pixel");
-    for p in planes.iter() {
-        assert_eq!(p.len(), n, "plane of width × height samples");
-    }
-    let mut tiles = Tiles::new(sigma_px, width, height);
-    let levels = tiles.stack();
-    if levels.is_empty() {
+    let Some(stack) = Stack::new(planes.iter().map(|p| p.len()), width, height, sigma_px) else {
         return;
-    }
-    // The levels of the exact kernel at full rate come first (the sigmas rise): they are
-    // blurred band by band; those of the half-rate stages and of the recursive filter,
-    // after them, region by region.
-    let exact = levels.partition_point(|&s| crate::blur::uses_full_rate_kernel(s, width, height));
-    let mut source = Vec::with_capacity(n);
+    };
+    let mut source = Vec::with_capacity(width * height);
     for p in planes.iter_mut() {
-        let range = copy_with_range(p, &mut source);
-        banded_levels(p, &source, width, sigma_px, &levels, exact, &tiles);
+        copy_plane(p, &mut source);
+        stack.blur(p, &source);
+    }
+}
+
+/// [`varying_gaussian_blur`] of planes held in vectors, without copying them: each
+/// plane's samples become the source the blur reads, and the blur is written into other
+/// memory (one spare plane for all, the previous plane's after the first), which then
+/// replaces the plane's. The same result bit for bit; the operator's form (a copy of each
+/// 1080p plane cost about 1 ms).
+///
+/// # Panics
+/// As [`varying_gaussian_blur`].
+pub fn varying_gaussian_blur_vecs(
+    planes: &mut [&mut Vec<f32>],
+    width: usize,
+    height: usize,
+    sigma_px: &[f32],
+) {
+    let Some(stack) = Stack::new(planes.iter().map(|p| p.len()), width, height, sigma_px) else {
+        return;
+    };
+    // Zeroed pages from the system, touched first by the blur's parallel bands (kept
+    // from call to call by the thread, it measured no faster).
+    let mut spare = vec![0f32; width * height];
+    for p in planes.iter_mut() {
+        std::mem::swap(*p, &mut spare);
+        stack.blur(p, &spare);
+    }
+}
+
+/// The levels of one varying blur and the tiles that take them, shared by its planes.
+struct Stack<'a> {
+    width: usize,
+    height: usize,
+    sigma_px: &'a [f32],
+    levels: Vec<f32>,
+    /// How many levels (the first ones) are the exact kernel at full rate.
+    exact: usize,
+    tiles: Tiles,
+}
+
+impl<'a> Stack<'a> {
+    /// The stack for planes of the lengths `lens`; `None` when no pixel is blurred.
+    fn new(
+        lens: impl Iterator<Item = usize>,
+        width: usize,
+        height: usize,
+        sigma_px: &'a [f32],
+    ) -> Option<Self> {
+        let n = width * height;
+        assert_eq!(sigma_px.len(), n, "one sigma per pixel");
+        for len in lens {
+            assert_eq!(len, n, "plane of width × height samples");
+        }
+        let mut tiles = Tiles::new(sigma_px, width, height);
+        let levels = tiles.stack();
+        if levels.is_empty() {
+            return None;
+        }
+        // The levels of the exact kernel at full rate come first (the sigmas rise): they
+        // are blurred band by band; those of the half-rate stages and of the recursive
+        // filter, after them, region by region.
+        let exact =
+            levels.partition_point(|&s| crate::blur::uses_full_rate_kernel(s, width, height));
+        Some(Stack {
+            width,
+            height,
+            sigma_px,
+            levels,
+            exact,
+            tiles,
+        })
+    }
+
+    /// The blur of `source` written to `out` (every sample).
+    fn blur(&self, out: &mut [f32], source: &[f32]) {
+        let (w, h, sig) = (self.width, self.height, self.sigma_px);
+        let (levels, exact, tiles) = (&self.levels[..], self.exact, &self.tiles);
+        let range = banded_levels(out, source, w, sig, levels, exact, tiles);
         if exact < levels.len() {
-            region_levels(
-                p, &source, width, height, sigma_px, &levels, exact, &tiles, range,
-            );
+            region_levels(out, source, w, h, sig, levels, exact, tiles, range);
         }
     }
 }
 
-/// Samples per piece of [`copy_with_range`]'s parallel passes.
-const COPY_PIECE: usize = 64 * 1024;
-
-/// `plane` copied into `source` (which it replaces), and its range: largest minus smallest
-/// value, `+∞` when one is not finite. Both in parallel (they were serial passes over the
-/// plane, from memory, for each plane).
-fn copy_with_range(plane: &[f32], source: &mut Vec<f32>) -> f64 {
+/// `plane` copied into `source` (which it replaces), in parallel.
+fn copy_plane(plane: &[f32], source: &mut Vec<f32>) {
     source.clear();
     #[cfg(feature = "rayon")]
     {
         use rayon::prelude::*;
         source.par_extend(plane.par_iter().copied());
-        let (lo, hi, finite) = plane
-            .par_chunks(COPY_PIECE)
-            .map(|c| widest!(range_kernel(c)))
-            .reduce(|| EMPTY_RANGE, join_ranges);
-        span(lo, hi, finite)
     }
     #[cfg(not(feature = "rayon"))]
-    {
-        source.extend_from_slice(plane);
-        let (lo, hi, finite) = plane
-            .chunks(COPY_PIECE)
-            .map(|c| widest!(range_kernel(c)))
-            .fold(EMPTY_RANGE, join_ranges);
-        span(lo, hi, finite)
-    }
+    source.extend_from_slice(plane);
 }
 
 /// Rows per band of [`banded_levels`]: half a tile, so that a band's output, sigmas and
@@ -201,7 +249,8 @@ const BAND_ROWS: usize = TILE_PX / 2;
 
 /// The levels of the exact kernel at full rate (`levels[..exact]`, each under
 /// [`crate::blur::MULTIRATE_MIN_SIGMA_PX`]), blurred from `source` and added into `plane`,
-/// whose pixels not blurred keep their values and the others start at 0: in parallel over
+/// whose pixels not blurred take their values from `source` and the others start at 0
+/// (every sample is written): in parallel over
 /// bands of [`BAND_ROWS`] rows, each blurring and adding its levels in their order, every
 /// level only over the band's rows and the runs of adjacent tiles that take it (reading
 /// the kernel's radius of columns and rows around them in `source`, where they are:
@@ -209,7 +258,10 @@ const BAND_ROWS: usize = TILE_PX / 2;
 /// the whole-plane blur's bit for bit ([`crate::blur::exact_rows`]) and each pixel takes
 /// its levels in the same order, so the result is that of blurring each level over
 /// regions, one level after the other; but the band's rows of `plane` and `sigma_px`
-/// are read and written while they are in cache, not once per level.
+/// are read and written while they are in cache, not once per level. Returns the range
+/// of `source`: largest minus smallest value, `+∞` when one is not finite (for the
+/// reach of the levels over regions, [`region_levels`]), measured band by band as the
+/// bands' rows are read.
 fn banded_levels(
     plane: &mut [f32],
     source: &[f32],
@@ -218,7 +270,7 @@ fn banded_levels(
     levels: &[f32],
     exact: usize,
     tiles: &Tiles,
-) {
+) -> f64 {
     let min_sigma = min_blur_sigma_f32();
     let height = plane.len() / width;
     // Each level's kernel once, not once per band and run.
@@ -230,11 +282,12 @@ fn banded_levels(
         let y0 = b * BAND_ROWS;
         let rows = out.len() / width;
         let sig = &sigma_px[y0 * width..][..out.len()];
+        let src = &source[y0 * width..][..out.len()];
         // The unblurred part: pixels not blurred keep their values, the others start at 0.
-        widest!(clear_blurred(out, sig, min_sigma));
+        let range = widest!(unblurred(out, src, sig, min_sigma));
         let ty = y0 / TILE_PX;
         let Some((first, last)) = tiles.band_levels(ty) else {
-            return;
+            return range;
         };
         let end = (last + 1).min(exact);
         for (j, half) in kernels.iter().enumerate().take(end).skip(first) {
@@ -259,30 +312,34 @@ fn banded_levels(
                 }
             }
         }
+        range
     };
     #[cfg(feature = "rayon")]
-    {
+    let (lo, hi, finite) = {
         use rayon::prelude::*;
         plane
             .par_chunks_mut(BAND_ROWS * width)
             .enumerate()
-            .for_each_init(Vec::new, band);
-    }
+            .map_init(Vec::new, band)
+            .reduce(|| EMPTY_RANGE, join_ranges)
+    };
     #[cfg(not(feature = "rayon"))]
-    {
+    let (lo, hi, finite) = {
         let mut buf = Vec::new();
         plane
             .chunks_mut(BAND_ROWS * width)
             .enumerate()
-            .for_each(|b| band(&mut buf, b));
-    }
+            .map(|b| band(&mut buf, b))
+            .fold(EMPTY_RANGE, join_ranges)
+    };
+    span(lo, hi, finite)
 }
 
 /// The levels `levels[from..]` (of the half-rate stages and the recursive filter),
 /// blurred from `source` and added into `plane` after the levels below them: one level
 /// after the other, each blurred over the regions that take it ([`Tiles::regions`]) with
-/// the reach of [`REGION_TOLERANCE`] relative to `range` (that of `source`,
-/// [`copy_with_range`]), in parallel.
+/// the reach of [`REGION_TOLERANCE`] relative to `range` (that of `source`, from
+/// [`banded_levels`]), in parallel.
 ///
 /// A region of a finite kernel (half rate, below [`crate::blur::IIR_MIN_SIGMA_PX`]) is
 /// one [`crate::blur::exact_pass`]: its rows are read from `source` as the pass needs
@@ -429,12 +486,20 @@ fn range_kernel(plane: &[f32]) -> (f32, f32, bool) {
     (lo, hi, finite)
 }
 
-/// Zero the pixels of `plane` that are blurred (sigma at or above `min_sigma`).
+/// `plane` where the blur starts: 0 for the pixels that are blurred (sigma at or above
+/// `min_sigma`), `source`'s value for the others; returns `source`'s [`range_kernel`],
+/// measured in the same pass.
 #[inline(always)]
-fn clear_blurred(plane: &mut [f32], sigma_px: &[f32], min_sigma: f32) {
-    for (v, &s) in plane.iter_mut().zip(sigma_px) {
-        *v = if s >= min_sigma { 0.0 } else { *v };
+fn unblurred(
+    plane: &mut [f32],
+    source: &[f32],
+    sigma_px: &[f32],
+    min_sigma: f32,
+) -> (f32, f32, bool) {
+    for ((v, &x), &s) in plane.iter_mut().zip(source).zip(sigma_px) {
+        *v = if s >= min_sigma { 0.0 } else { x };
     }
+    range_kernel(source)
 }
 
 /// A rectangle `[x0, x1, y0, y1]` (half-open), pixels.
@@ -792,6 +857,16 @@ mod tests {
             reference_blur(&mut want, w, h, &sigma);
             let mut got = plane.clone();
             varying_gaussian_blur(&mut [got.as_mut_slice()], w, h, &sigma);
+            // The form over vectors (each plane blurred into the memory of a spare one, then
+            // the previous plane's) gives the same samples, on two planes of other content.
+            let other: Vec<f32> = plane.iter().rev().copied().collect();
+            let mut other_got = other.clone();
+            varying_gaussian_blur(&mut [other_got.as_mut_slice()], w, h, &sigma);
+            let (mut a, mut b) = (plane.clone(), other.clone());
+            varying_gaussian_blur_vecs(&mut [&mut a, &mut b], w, h, &sigma);
+            for (x, y) in a.iter().zip(&got).chain(b.iter().zip(&other_got)) {
+                assert_eq!(x.to_bits(), y.to_bits(), "σ {lo}..{hi}: by vectors {x} {y}");
+            }
             let mut worst = 0f64;
             for (i, (a, b)) in got.iter().zip(&want).enumerate() {
                 if exact {

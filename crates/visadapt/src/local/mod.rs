@@ -548,7 +548,7 @@ pub fn apply_into(
         ];
         map_chunk(mapping, xyz, scotopic, offsets, r, g, b)
     });
-    operator::blur_and_clip(stats, r, g, b, blur)
+    operator::blur_and_clip(stats, [r, g, b], blur)
 }
 
 /// [`apply_into`], consuming the image: the display is written over its X, Y, Z planes
@@ -580,7 +580,7 @@ pub fn apply_owned(
         })
     });
     drop(scotopic);
-    let stats = operator::blur_and_clip(stats, &mut r, &mut g, &mut b, blur);
+    let stats = operator::blur_and_clip(stats, [&mut r, &mut g, &mut b], blur);
     let display = DisplayImage {
         width,
         height,
@@ -598,13 +598,13 @@ fn acuity_blur(
     map: &AdaptationMap,
     width: usize,
     height: usize,
-) -> Option<impl FnOnce(&mut [&mut [f32]]) + '_> {
+) -> Option<impl FnOnce([&mut Vec<f32>; 3]) + '_> {
     map.acuity_sigma_px
         .as_deref()
         .filter(|s| s.iter().any(|&v| v > 0.0))
         .map(|sigma| {
-            move |planes: &mut [&mut [f32]]| {
-                acuity::varying_gaussian_blur(planes, width, height, sigma)
+            move |mut planes: [&mut Vec<f32>; 3]| {
+                acuity::varying_gaussian_blur_vecs(&mut planes, width, height, sigma)
             }
         })
 }
