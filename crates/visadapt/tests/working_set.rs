@@ -178,10 +178,11 @@ fn local_adaptation_allocates_its_map_and_no_second_image() {
     assert_same(&by_ref, &owned);
     let (map_bpp, owned_bpp) = (map_extra as f64 / n, owned_extra as f64 / n);
     // The map is three planes (photopic and scotopic offsets, acuity sigmas): 12 B/pixel;
-    // the varying blur holds a copy of one display plane and one blurred level (8), plus
-    // the Gaussian's scratch. Measured before: the map upsampled interleaved and then
-    // de-interleaved (24 more at once), the blur's copies of all three planes (24), and
-    // map_owned making a second image (12); 39.2 B/pixel with the first two fixed.
+    // the varying blur holds a spare display plane (it blurs each plane into the spare's
+    // memory) and its bands' blurred rows, plus the Gaussian's scratch. Measured before:
+    // the map upsampled interleaved and then de-interleaved (24 more at once), the blur's
+    // copies of all three planes (24), and map_owned making a second image (12); 39.2
+    // B/pixel with the first two fixed.
     assert!(
         owned_bpp < 24.0,
         "map_owned, local: {owned_bpp:.2} bytes per pixel beyond the input"
