@@ -243,6 +243,10 @@ pub(crate) fn segment<const FMA: bool, const L: usize, const P: usize, S>(
     add: &impl Fn(S, S) -> S,
     mut acc: S,
 ) -> S {
+    assert!(
+        !(in_place && direct.is_some()),
+        "segment: rows read in place cannot be written in place"
+    );
     let r = half.len() - 1;
     let n = 2 * r + 1;
     // The ring holds the rows of a group of GROUP output rows: their `2r + GROUP` inputs.

@@ -165,8 +165,8 @@ pub fn varying_gaussian_blur_vecs(
     let Some(stack) = Stack::new(planes.iter().map(|p| p.len()), width, height, sigma_px) else {
         return;
     };
-    // Zeroed pages from the system, touched first by the blur's parallel bands (kept
-    // from call to call by the thread, it measured no faster).
+    // Zeroed pages from the system, touched first by the blur's parallel bands (a spare
+    // kept by the thread from call to call measured no faster).
     let mut spare = vec![0f32; width * height];
     for p in planes.iter_mut() {
         std::mem::swap(*p, &mut spare);
@@ -283,7 +283,8 @@ fn banded_levels(
         let rows = out.len() / width;
         let sig = &sigma_px[y0 * width..][..out.len()];
         let src = &source[y0 * width..][..out.len()];
-        // The unblurred part: pixels not blurred keep their values, the others start at 0.
+        // The unblurred part: pixels not blurred take the source's values, the others
+        // start at 0.
         let range = widest!(unblurred(out, src, sig, min_sigma));
         let ty = y0 / TILE_PX;
         let Some((first, last)) = tiles.band_levels(ty) else {
