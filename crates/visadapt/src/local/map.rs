@@ -500,8 +500,13 @@ fn angular_view(view: &View, w: usize, h: usize) -> View {
 }
 
 /// The direction (unit vector) seen at image position `(u, v)` (pixels from the top-left
-/// corner, continuous) of a `w × h` image in `view`; positions outside a fisheye's circle
-/// are taken on its rim.
+/// corner, continuous) of a `w × h` image in `view`. The fisheyes' formulas hold beyond
+/// the circle the horizontal angle spans (a frame wider than it is high, or a square
+/// frame's corners, see more than the horizontal angle along the diagonal) up to where the
+/// projection ends, as Radiance's views and [`crate::glare`] take them: the angular
+/// fisheye at 180° from the axis, the hemispherical at 90°; a position beyond that is
+/// taken on that rim. (They were taken on the circle of the horizontal angle, so that
+/// the pixels in the corners of a 16:9 angular fisheye subtended almost nothing.)
 fn direction(view: &View, w: usize, h: usize, u: f64, v: f64) -> [f64; 3] {
     let (half_w, half_h) = (w as f64 / 2.0, h as f64 / 2.0);
     let (dx, dy) = (u - half_w, v - half_h);
@@ -518,16 +523,15 @@ fn direction(view: &View, w: usize, h: usize, u: f64, v: f64) -> [f64; 3] {
         let (s, c) = theta.sin_cos();
         [s * dx / r, s * dy / r, c]
     };
-    let r_rel = || ((dx * dx + dy * dy).sqrt() / half_w).min(1.0);
+    // The distance from the centre in units of the horizontal half-width.
+    let r_rel = || (dx * dx + dy * dy).sqrt() / half_w;
     match view.projection {
         Projection::Perspective | Projection::Parallel => {
             let t = half_fov.tan() / half_w;
             normalise([dx * t, dy * t, 1.0])
         }
-        Projection::AngularFisheye => polar(r_rel() * half_fov),
-        Projection::HemisphericalFisheye => {
-            polar((r_rel() * half_fov.sin()).clamp(-1.0, 1.0).asin())
-        }
+        Projection::AngularFisheye => polar((r_rel() * half_fov).min(std::f64::consts::PI)),
+        Projection::HemisphericalFisheye => polar((r_rel() * half_fov.sin()).min(1.0).asin()),
         Projection::Planisphere => polar(2.0 * (r_rel() * (half_fov / 2.0).tan()).atan()),
         Projection::Cylindrical => {
             let phi = dx / half_w * half_fov;
@@ -1387,6 +1391,50 @@ mod tests {
         let at60 = pixel_size_deg(&f, 1000, 1000, 500.0 + 1000.0 / 3.0, 500.0);
         let theta = 60f64.to_radians();
         assert!((at60 / (0.18 * (theta.sin() / theta).sqrt()) - 1.0).abs() < 1e-3);
+        // Beyond the circle of the horizontal angle the projection goes on: the corner of
+        // a 16:9 angular fisheye 66.7° wide (`mixtex.hdr`'s view) is 38.2° off the axis,
+        // and the corner of the 180° square one 127.2°. (Taken on the circle's rim, the
+        // first corner pixel here subtended 0.75× its size, and that of the 128 × 72
+        // `mixtex.hdr` 0.0018° instead of 0.50°.)
+        let wide = View {
+            projection: Projection::AngularFisheye,
+            horizontal_deg: 1280.0 / 19.2,
+            vertical_deg: 37.5,
+        };
+        for (view, w, h) in [(wide, 1280, 720), (f, 1000, 1000)] {
+            let (u, v) = (0.5, 0.5);
+            let deg_per_px = view.horizontal_deg / w as f64;
+            let r = ((w as f64 / 2.0 - u).powi(2) + (h as f64 / 2.0 - v).powi(2)).sqrt();
+            let theta = (r * deg_per_px).to_radians();
+            let want = deg_per_px * (theta.sin() / theta).sqrt();
+            let got = pixel_size_deg(&view, w, h, u, v);
+            assert!(
+                (got / want - 1.0).abs() < 1e-3,
+                "{w}×{h} corner: {got} {want}"
+            );
+        }
+        // A hemispherical fisheye narrower than 180° goes on to 90°: 120° across a square
+        // frame, its corner is at sin θ = √2·sin 60° (beyond 1: on the 90° rim, where the
+        // radial extent vanishes and the tangential one stands for both).
+        let hemi = View {
+            projection: Projection::HemisphericalFisheye,
+            horizontal_deg: 120.0,
+            vertical_deg: 120.0,
+        };
+        // Between the circle and the rim: at r = 1.1 half-widths along the diagonal,
+        // sin θ = 1.1·sin 60°, radially d(sin θ)/cos θ, tangentially sin θ / r per pixel.
+        let (w, r_rel) = (1000.0, 1.1);
+        let off = r_rel * 500.0 / 2f64.sqrt();
+        let got = pixel_size_deg(&hemi, 1000, 1000, 500.0 + off, 500.0 + off);
+        let per_px = 60f64.to_radians().sin() / (w / 2.0);
+        let s = r_rel * 60f64.to_radians().sin();
+        let radial = per_px / (1.0 - s * s).sqrt();
+        let tangential = s / (r_rel * w / 2.0);
+        let want = (radial * tangential).sqrt().to_degrees();
+        assert!(
+            (got / want - 1.0).abs() < 1e-3,
+            "hemispherical: {got} {want}"
+        );
     }
 
     /// The grid's pixels per degree, a quarter computed and mirrored where the grid is
