@@ -630,8 +630,8 @@ pub fn difference(reference: &HdrImage, test: &HdrImage, viewer: &Viewer) -> Res
         Adaptation::Local(AdaptationMap {
             acuity_sigma_px: Some(sigma),
             ..
-        }) => crate::local::acuity::varying_gaussian_blur(
-            &mut [dy.as_mut_slice(), dv.as_mut_slice()],
+        }) => crate::local::acuity::varying_gaussian_blur_vecs(
+            &mut [&mut dy, &mut dv],
             width,
             height,
             sigma,
