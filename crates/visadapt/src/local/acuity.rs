@@ -489,7 +489,8 @@ fn range_kernel(plane: &[f32]) -> (f32, f32, bool) {
 
 /// `plane` where the blur starts: 0 for the pixels that are blurred (sigma at or above
 /// `min_sigma`), `source`'s value for the others; returns `source`'s [`range_kernel`],
-/// measured in the same pass.
+/// measured right after, while the band's samples are in cache (a second loop, not a
+/// second trip through memory).
 #[inline(always)]
 fn unblurred(
     plane: &mut [f32],
