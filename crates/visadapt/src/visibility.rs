@@ -97,7 +97,7 @@
 //! the remaining noise is (just) invisible.
 
 use crate::acuity::AcuityFilter;
-use crate::local::{AdaptationMap, Table};
+use crate::local::{AdaptationMap, Table, offset_range};
 use crate::mesopic::rod_weight;
 use crate::operator::{self, MIN_BLUR_SIGMA_PX, Report, ViewingConditions};
 use crate::scotopic::{self, EQUAL_ENERGY_SP_RATIO};
@@ -294,12 +294,8 @@ struct LocalGains {
 
 impl LocalGains {
     fn new(map: &AdaptationMap) -> Self {
-        let range = |v: &[f32]| {
-            v.iter()
-                .fold((0f32, 0f32), |(lo, hi), &x| (lo.min(x), hi.max(x)))
-        };
-        let (lp, hp) = range(&map.offset_log);
-        let (ls, hs) = range(&map.offset_scotopic_log);
+        let (lp, hp) = offset_range(&map.offset_log);
+        let (ls, hs) = offset_range(&map.offset_scotopic_log);
         let (lwa, lwa_s) = (
             map.world_adaptation_cd_m2,
             map.world_adaptation_scotopic_cd_m2,

@@ -19,6 +19,7 @@
 //! within [`REGION_TOLERANCE`] above; tested). A pixel whose sigma is a level's exactly
 //! gets that level's Gaussian exactly; one below [`MIN_BLUR_SIGMA_PX`] is not blurred, as in the global operator.
 
+use super::{EMPTY_RANGE, join_ranges, range_kernel};
 use crate::operator::MIN_BLUR_SIGMA_PX;
 use std::sync::Mutex;
 
@@ -458,33 +459,6 @@ fn span(lo: f32, hi: f32, finite: bool) -> f64 {
     } else {
         f64::INFINITY
     }
-}
-
-/// [`range_kernel`] of no values.
-const EMPTY_RANGE: (f32, f32, bool) = (f32::INFINITY, f32::NEG_INFINITY, true);
-
-/// The [`range_kernel`] of two pieces joined, with its selects (so the same bounds as one
-/// pass over both).
-fn join_ranges(a: (f32, f32, bool), b: (f32, f32, bool)) -> (f32, f32, bool) {
-    (
-        if b.0 < a.0 { b.0 } else { a.0 },
-        if b.1 > a.1 { b.1 } else { a.1 },
-        a.2 & b.2,
-    )
-}
-
-/// Smallest and largest value of a plane and whether all are finite.
-#[inline(always)]
-fn range_kernel(plane: &[f32]) -> (f32, f32, bool) {
-    let (mut lo, mut hi, mut finite) = (f32::INFINITY, f32::NEG_INFINITY, true);
-    // Selects rather than `f32::min`/`max` (the same values: a NaN never replaces a
-    // bound, and `finite` records it), so that the loop vectorises.
-    for &v in plane {
-        lo = if v < lo { v } else { lo };
-        hi = if v > hi { v } else { hi };
-        finite &= v.is_finite();
-    }
-    (lo, hi, finite)
 }
 
 /// `plane` where the blur starts: 0 for the pixels that are blurred (sigma at or above

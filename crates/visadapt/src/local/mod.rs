@@ -133,6 +133,64 @@ impl LocalAdaptation {
     }
 }
 
+/// [`range_kernel`] of no values.
+pub(crate) const EMPTY_RANGE: (f32, f32, bool) = (f32::INFINITY, f32::NEG_INFINITY, true);
+
+/// The [`range_kernel`] of two pieces joined, with its selects (so the same bounds as one
+/// pass over both).
+pub(crate) fn join_ranges(a: (f32, f32, bool), b: (f32, f32, bool)) -> (f32, f32, bool) {
+    (
+        if b.0 < a.0 { b.0 } else { a.0 },
+        if b.1 > a.1 { b.1 } else { a.1 },
+        a.2 & b.2,
+    )
+}
+
+/// Lanes of [`range_kernel`]'s running bounds: one AVX-512 vector, two AVX2 ones.
+const RANGE_LANES: usize = 16;
+
+/// Smallest and largest value of a plane and whether all are finite (`+∞`, `−∞` and true
+/// when it is empty or all NaN).
+///
+/// The bounds are kept per lane over blocks of [`RANGE_LANES`] samples, then joined, so
+/// that the loop is vectorised. With one running bound (a select per sample that waits
+/// for the one before) it compiled to scalar code bound by that chain: about 10 % of the
+/// varying blur at 1080p, and 0.5 ms per 1080p plane of offsets for the tables. The
+/// selects are [`join_ranges`]'s, so a NaN never replaces a bound (`finite` records it)
+/// and the bounds are the values of one pass in order, but for the sign of a zero bound
+/// when both `0` and `-0` occur (the span, which is what the blur uses, is the same).
+#[inline(always)]
+pub(crate) fn range_kernel(plane: &[f32]) -> (f32, f32, bool) {
+    let mut lo = [EMPTY_RANGE.0; RANGE_LANES];
+    let mut hi = [EMPTY_RANGE.1; RANGE_LANES];
+    // Per lane, whether a sample was NaN or infinite: an integer mask, so that it stays
+    // in vector registers.
+    let mut bad = [0u32; RANGE_LANES];
+    let blocks = plane.chunks_exact(RANGE_LANES);
+    let tail = blocks.remainder();
+    for block in blocks {
+        let block: &[f32; RANGE_LANES] = block.try_into().expect("a block of lanes");
+        for l in 0..RANGE_LANES {
+            let v = block[l];
+            lo[l] = if v < lo[l] { v } else { lo[l] };
+            hi[l] = if v > hi[l] { v } else { hi[l] };
+            bad[l] |= u32::from(!v.is_finite());
+        }
+    }
+    let lanes = (0..RANGE_LANES).map(|l| (lo[l], hi[l], bad[l] == 0));
+    let samples = tail.iter().map(|&v| (v, v, v.is_finite()));
+    lanes
+        .chain(samples)
+        .fold(EMPTY_RANGE, |r, (a, b, f)| join_ranges(r, (a, b, f)))
+}
+
+/// The offsets a map's tables cover: the smallest and largest of `offsets` other than
+/// NaN, widened to include 0 (the global level, a node of every table).
+pub(crate) fn offset_range(offsets: &[f32]) -> (f32, f32) {
+    let (lo, hi, _) = widest!(range_kernel(offsets));
+    (lo.min(0.0), hi.max(0.0))
+}
+
 /// One tabulated coefficient set: values at nodes `start + j/TABLE_STEPS_PER_LOG_UNIT`.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Table<const K: usize> {
@@ -418,12 +476,8 @@ impl LocalMapping {
         cone: impl Fn(f64) -> (f64, f64),
         rod: impl Fn(f64) -> (f64, f64),
     ) -> Self {
-        let range = |v: &[f32]| {
-            v.iter()
-                .fold((0f32, 0f32), |(lo, hi), &x| (lo.min(x), hi.max(x)))
-        };
-        let (lp, hp) = range(&map.offset_log);
-        let (ls, hs) = range(&map.offset_scotopic_log);
+        let (lp, hp) = offset_range(&map.offset_log);
+        let (ls, hs) = offset_range(&map.offset_scotopic_log);
         let display_max_cd_m2 = global.display_max_cd_m2;
         let bound = f64::from(operator::MAX_DISPLAY_RELATIVE);
         let (lwa, lwa_s) = (
@@ -1121,6 +1175,66 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The plane's range by lanes ([`range_kernel`]) is that of one select per sample in
+    /// order ([`join_ranges`] from [`EMPTY_RANGE`]) on every length around the lane
+    /// count (the tail included) and on a long plane, with NaN, ±∞ and both zeros among
+    /// finite values; a NaN anywhere makes it not finite, never a bound. The tables' span
+    /// ([`offset_range`]) is that of `f32::min`/`max` from 0.
+    #[test]
+    fn plane_range_by_lanes_is_the_serial_one() {
+        let mut seed = 7u32;
+        let mut next = move || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            seed >> 8
+        };
+        let special = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0];
+        let mut value = |rare: u32| {
+            let r = next();
+            if r % rare == 0 {
+                special[(r / rare) as usize % special.len()]
+            } else {
+                (r % 20_000) as f32 * 0.37 - 3000.0
+            }
+        };
+        let serial = |v: &[f32]| {
+            v.iter()
+                .fold(EMPTY_RANGE, |r, &x| join_ranges(r, (x, x, x.is_finite())))
+        };
+        let mut lens: Vec<usize> = (0..3 * RANGE_LANES + 3).collect();
+        lens.push(4099);
+        for (k, &n) in lens.iter().enumerate() {
+            // Every third plane has no special values, so that finite planes are tested.
+            let rare = if k % 3 == 0 { u32::MAX } else { 97 };
+            let plane: Vec<f32> = (0..n).map(|_| value(rare)).collect();
+            let (a, b) = (range_kernel(&plane), serial(&plane));
+            // `==`, so that 0 and -0 are the same bound.
+            assert!(
+                a.0 == b.0 && a.1 == b.1 && a.2 == b.2,
+                "n = {n}: {a:?} against {b:?}"
+            );
+            assert!(!a.0.is_nan() && !a.1.is_nan(), "n = {n}: a NaN bound");
+            // The tables' span: the same bounds as `f32::min`/`max` from 0.
+            let fold = plane
+                .iter()
+                .fold((0f32, 0f32), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+            let span = offset_range(&plane);
+            assert!(
+                span.0 == fold.0 && span.1 == fold.1,
+                "n = {n}: {span:?}, {fold:?}"
+            );
+        }
+        assert_eq!(offset_range(&[f32::NAN, 2.0, 0.5]), (0.0, 2.0));
+        assert_eq!(offset_range(&[-1.5, f32::NAN, -0.25]), (-1.5, 0.0));
+        let plane = [1.0, f32::NAN, -2.0, 5.0];
+        assert_eq!(range_kernel(&plane), (-2.0, 5.0, false));
+        let mut long = vec![0.5f32; 3 * RANGE_LANES + 1];
+        long[RANGE_LANES + 3] = -7.0;
+        long[2 * RANGE_LANES] = 9.0;
+        assert_eq!(range_kernel(&long), (-7.0, 9.0, true));
+        long[3 * RANGE_LANES] = f32::NEG_INFINITY;
+        assert_eq!(range_kernel(&long), (f32::NEG_INFINITY, 9.0, false));
     }
 
     #[test]
