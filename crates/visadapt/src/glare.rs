@@ -602,9 +602,10 @@ impl Grid {
         // in `i64` exactly), and so are the weights.
         let gx = gx.clamp(0.0, (self.nx as i64 - 1) as f64 - 1e-9);
         let gy = gy.clamp(0.0, (self.ny as i64 - 1) as f64 - 1e-9);
-        // Not negative, so truncation is the floor: `f64::floor` is a call of the C
-        // library's `floor` on baseline x86-64 (no SSE4.1), twice per pixel in the splat
-        // and twice in the read-back.
+        // Not negative, so truncation is the floor: `f64::floor` is a call of a software
+        // `floor` (the compiler's runtime library) on baseline x86-64, which has no
+        // rounding instruction (SSE4.1), twice per pixel in the splat and twice in the
+        // read-back.
         let (i, j) = (gx as i64, gy as i64);
         let (fx, fy) = (gx - i as f64, gy - j as f64);
         let k = j as usize * self.nx + i as usize;

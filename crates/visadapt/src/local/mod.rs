@@ -149,8 +149,8 @@ pub(crate) fn join_ranges(a: (f32, f32, bool), b: (f32, f32, bool)) -> (f32, f32
 /// Lanes of [`range_kernel`]'s running bounds: one AVX-512 vector, two AVX2 ones.
 const RANGE_LANES: usize = 16;
 
-/// Smallest and largest value of a plane and whether all are finite (`+∞`, `−∞` and true
-/// when it is empty or all NaN).
+/// Smallest and largest value of a plane other than NaN, and whether all are finite
+/// (`+∞`, `−∞` and true when it is empty; `+∞`, `−∞` and false when all are NaN).
 ///
 /// The bounds are kept per lane over blocks of [`RANGE_LANES`] samples, then joined, so
 /// that the loop is vectorised. With one running bound (a select per sample that waits
@@ -1229,6 +1229,9 @@ mod tests {
         assert_eq!(offset_range(&[-1.5, f32::NAN, -0.25]), (-1.5, 0.0));
         let plane = [1.0, f32::NAN, -2.0, 5.0];
         assert_eq!(range_kernel(&plane), (-2.0, 5.0, false));
+        let nan = [f32::NAN; RANGE_LANES + 3];
+        assert_eq!(range_kernel(&nan), (f32::INFINITY, f32::NEG_INFINITY, false));
+        assert_eq!(range_kernel(&[]), EMPTY_RANGE);
         let mut long = vec![0.5f32; 3 * RANGE_LANES + 1];
         long[RANGE_LANES + 3] = -7.0;
         long[2 * RANGE_LANES] = 9.0;
