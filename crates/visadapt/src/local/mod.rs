@@ -1230,7 +1230,10 @@ mod tests {
         let plane = [1.0, f32::NAN, -2.0, 5.0];
         assert_eq!(range_kernel(&plane), (-2.0, 5.0, false));
         let nan = [f32::NAN; RANGE_LANES + 3];
-        assert_eq!(range_kernel(&nan), (f32::INFINITY, f32::NEG_INFINITY, false));
+        assert_eq!(
+            range_kernel(&nan),
+            (f32::INFINITY, f32::NEG_INFINITY, false)
+        );
         assert_eq!(range_kernel(&[]), EMPTY_RANGE);
         let mut long = vec![0.5f32; 3 * RANGE_LANES + 1];
         long[RANGE_LANES + 3] = -7.0;
