@@ -69,9 +69,9 @@
 //! upsampling) is linear in the pixels and flat in the radius; the grid's (the domain
 //! transform, in parallel over its two channels, and one acuity sigma per sample) grows
 //! as the radius shrinks, with the number of samples: about 83,000 at 0.25° on a 1080p
-//! frame 20° wide against 3,900 at 1° and 2,000 from 3° on (the step's cap). So the map is not flat in
-//! the radius at small radii; neither is the acuity stage, whose blurs cover more of
-//! the image where the sigmas vary faster.
+//! frame 20° wide against 3,900 at 1° and 2,000 from 3° on (the step's cap). So the map
+//! is not flat in the radius at small radii; neither is the acuity stage, whose blurs
+//! cover more of the image where the sigmas vary faster.
 
 use crate::acuity::AcuityFilter;
 use crate::image::{Projection, Samples, View};
