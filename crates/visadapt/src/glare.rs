@@ -65,9 +65,10 @@
 //! the veil far from a light is ~1e-9 of its flux): O(M log M) in the grid size M and
 //! independent of the PSF's extent. The grid is zero-padded to at least twice the image's
 //! angular extent so that nothing wraps around. Every pixel reads its veil from the grid
-//! bilinearly. The kernel's spectrum depends only on the grid and the observer, so the
-//! last one made is kept and reused by the next call for the same ones (the frames of a
-//! video; one entry, under 10 MB).
+//! bilinearly. The kernel's spectrum depends only on the grid and the observer, and where
+//! each pixel looks only on the view and the size: a [`Workspace`] keeps them, with the
+//! FFT plans and buffers, for the next frame of a video or a sequence (the free functions
+//! use a fresh one).
 //!
 //! The grid cell is the image's own pixel (at the centre) or, for large images, the angular
 //! extent divided by [`MAX_GRID_CELLS`]: the veil is smooth beyond the near radius, so a
@@ -290,63 +291,254 @@ pub fn apply(image: &HdrImage, view: &View, glare: &Glare) -> Result<(HdrImage, 
 
 /// [`apply`] over the image's own planes: the veil is added in place (and a scotopic plane
 /// estimated when the image has none), so that no second image is allocated. On an error
-/// the image is unchanged.
+/// the image is unchanged. A fresh [`Workspace`]: for frames of one size, view and
+/// observer, keep one and call [`Workspace::apply_in_place`].
 pub fn apply_in_place(image: &mut HdrImage, view: &View, glare: &Glare) -> Result<VeilReport> {
-    image.check_consistent()?;
-    glare.validate()?;
-    let (w, h) = (image.width, image.height);
-    let geometry = Geometry::new(view, w, h)?;
-    let grid = Grid::new(&geometry, view, w, h)?;
-    let norm = glare.hemisphere_integral();
-    let near_radius_deg = NEAR_RADIUS_CELLS * grid.cell_deg;
-    let scattered = glare.integral(near_radius_deg, HEMISPHERE_DEG) / norm;
-    let kernel = grid.kernel(glare, norm, near_radius_deg);
+    Workspace::new().apply_in_place(image, view, glare)
+}
 
-    // The four planes the veil goes on; the scotopic one estimated before the veil.
-    let scotopic: Vec<f32> = match image.scotopic.take() {
-        Some(s) => s,
-        None => image
-            .x
-            .iter()
-            .zip(&image.y)
-            .zip(&image.z)
-            .map(|((x, y), z)| crate::scotopic::from_xyz(*x, *y, *z))
-            .collect(),
-    };
-    let flux = grid.splat(&geometry, [&image.x, &image.y, &image.z, &scotopic], w, h);
-    let veil = |f: &Vec<f64>| grid.convolve(f, &kernel);
-    #[cfg(feature = "rayon")]
-    let lum: Vec<Vec<f64>> = {
-        use rayon::prelude::*;
-        flux.par_iter().map(veil).collect()
-    };
-    #[cfg(not(feature = "rayon"))]
-    let lum: Vec<Vec<f64>> = flux.iter().map(veil).collect();
-    drop(flux);
+/// What the glare stage keeps from one call to the next: the frames of a video or a
+/// sequence, and the viewer's, share their size, view and observer, so each call would
+/// remake the same things. Kept here: where every pixel looks (a quarter of the image's
+/// looks; the rest follow by symmetry), the kernel's spectrum, the FFT plans, and the
+/// grids and FFT buffers of every plane, reused instead of allocated (and page-faulted
+/// in) afresh. Each is remade when what it depends on changes, so a workspace gives the
+/// same results bit for bit as a fresh one for any sequence of calls (tested). At 1080p
+/// with a 60° view it holds about 60 MB.
+///
+/// ```
+/// use visadapt::{HdrImage, View, glare::{Glare, Workspace}};
+/// let (w, h) = (160, 90);
+/// let view = View::perspective(40.0, w, h);
+/// let mut workspace = Workspace::new();
+/// for frame in 0..3 {
+///     let mut scene = HdrImage::zeros(w, h);
+///     let c = h / 2 * w + 40 + 30 * frame; // a light moving to the right
+///     scene.x[c] = 9.5e5; scene.y[c] = 1e6; scene.z[c] = 1.09e6;
+///     let veil = workspace.apply_in_place(&mut scene, &view, &Glare::default())?;
+///     assert!(scene.y[c + 3] > 0.0 && veil.scattered_fraction > 0.05);
+/// }
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+#[derive(Clone, Default)]
+pub struct Workspace {
+    /// The looks of rows `0..⌈h/2⌉`, each its left `⌈w/2⌉` pixels, for the geometry of
+    /// the key.
+    looks: Option<(LooksKey, Vec<Look>)>,
+    /// The kernel's spectrum, for the grid and observer of the key.
+    kernel: Option<(KernelKey, Spectrum)>,
+    /// The FFT plans, for their sizes.
+    ffts: Option<Ffts>,
+    /// Each splat band's grid (the first holds their sum after the splat).
+    bands: Vec<Vec<Cell>>,
+    /// Each plane's FFT buffers.
+    planes: [PlaneFft; PLANES],
+    /// The veil of the four planes, per grid cell.
+    veils: Vec<Cell>,
+    /// The image [`Workspace::apply`] returns, its planes reused.
+    retina: Option<HdrImage>,
+}
 
-    let mut s_plane = scotopic;
-    let keep = (1.0 - scattered) as f32;
-    let mean_veil = grid.add_veil(
-        &geometry,
-        w,
-        [&mut image.x, &mut image.y, &mut image.z, &mut s_plane],
-        [&lum[0], &lum[1], &lum[2], &lum[3]],
-        keep,
+impl std::fmt::Debug for Workspace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Workspace")
+            .field("looks", &self.looks.as_ref().map(|(k, l)| (k, l.len())))
+            .field("kernel", &self.kernel.as_ref().map(|(k, _)| k))
+            .field("fft_size", &self.ffts.as_ref().map(|f| (f.fw, f.fh)))
+            .finish_non_exhaustive()
+    }
+}
+
+impl Workspace {
+    /// An empty workspace: the first call fills it.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// [`apply`], into an image this workspace keeps (its planes reused from call to
+    /// call): returns it, with the report.
+    pub fn apply(
+        &mut self,
+        image: &HdrImage,
+        view: &View,
+        glare: &Glare,
+    ) -> Result<(&HdrImage, VeilReport)> {
+        image.check_consistent()?;
+        glare.validate()?;
+        let mut retina = self.retina.take().unwrap_or_else(|| HdrImage::zeros(0, 0));
+        // The scotopic plane: the image's, or estimated into the kept one.
+        if image.scotopic.is_some() {
+            retina.clone_from(image);
+        } else {
+            let mut s = retina.scotopic.take().unwrap_or_default();
+            retina.clone_from(image);
+            estimate_scotopic(&image.x, &image.y, &image.z, &mut s);
+            retina.scotopic = Some(s);
+        }
+        let report = self.apply_in_place(&mut retina, view, glare);
+        let retina = self.retina.insert(retina);
+        Ok((retina, report?))
+    }
+
+    /// [`apply_in_place`], reusing what this workspace kept from its last call.
+    pub fn apply_in_place(
+        &mut self,
+        image: &mut HdrImage,
+        view: &View,
+        glare: &Glare,
+    ) -> Result<VeilReport> {
+        image.check_consistent()?;
+        glare.validate()?;
+        let (w, h) = (image.width, image.height);
+        let geometry = Geometry::new(view, w, h)?;
+        let grid = Grid::new(&geometry, view, w, h)?;
+        let norm = glare.hemisphere_integral();
+        let near_radius_deg = NEAR_RADIUS_CELLS * grid.cell_deg;
+        let scattered = glare.integral(near_radius_deg, HEMISPHERE_DEG) / norm;
+        let Workspace {
+            looks,
+            kernel,
+            ffts,
+            bands,
+            planes,
+            veils,
+            retina: _,
+        } = self;
+        let ffts = Ffts::for_grid(ffts, &grid);
+        let kernel = grid.kernel(kernel, ffts, glare, norm, near_radius_deg);
+        let looks = Looks::of(looks, &geometry, w, h);
+
+        // The four planes the veil goes on; the scotopic one estimated before the veil.
+        let scotopic: Vec<f32> = match image.scotopic.take() {
+            Some(s) => s,
+            None => {
+                let mut s = Vec::new();
+                estimate_scotopic(&image.x, &image.y, &image.z, &mut s);
+                s
+            }
+        };
+        let flux = grid.splat(&looks, [&image.x, &image.y, &image.z, &scotopic], bands);
+        let veil = |(plane, buffers): (usize, &mut PlaneFft)| {
+            grid.convolve(flux, plane, kernel, ffts, buffers);
+        };
+        #[cfg(feature = "rayon")]
+        {
+            use rayon::prelude::*;
+            planes.par_iter_mut().enumerate().for_each(veil);
+        }
+        #[cfg(not(feature = "rayon"))]
+        planes.iter_mut().enumerate().for_each(veil);
+        veils.clear();
+        veils
+            .extend((0..grid.nx * grid.ny).map(|k| std::array::from_fn(|p| planes[p].received[k])));
+
+        let mut s_plane = scotopic;
+        let keep = (1.0 - scattered) as f32;
+        let mean_veil = grid.add_veil(
+            &looks,
+            [&mut image.x, &mut image.y, &mut image.z, &mut s_plane],
+            veils,
+            keep,
+        );
+        image.scotopic = Some(s_plane);
+        let centre = grid.sample(veils, grid.to_grid(0.0, 0.0));
+        Ok(VeilReport {
+            glare: *glare,
+            hemisphere_integral: norm,
+            cell_deg: grid.cell_deg,
+            near_radius_deg,
+            scattered_fraction: scattered,
+            fft_size: (grid.fft_w, grid.fft_h),
+            veil_at_centre_cd_m2: centre[1],
+            veil_at_centre_scotopic_cd_m2: centre[3],
+            mean_veil_cd_m2: mean_veil,
+        })
+    }
+}
+
+/// The scotopic plane estimated from the `x`, `y`, `z` planes, into `out` (its memory
+/// reused).
+fn estimate_scotopic(x: &[f32], y: &[f32], z: &[f32], out: &mut Vec<f32>) {
+    out.clear();
+    out.extend(
+        x.iter()
+            .zip(y)
+            .zip(z)
+            .map(|((x, y), z)| crate::scotopic::from_xyz(*x, *y, *z)),
     );
-    image.scotopic = Some(s_plane);
-    let centre = |l: &[f64]| grid.sample(l, grid.to_grid(0.0, 0.0));
-    let report = VeilReport {
-        glare: *glare,
-        hemisphere_integral: norm,
-        cell_deg: grid.cell_deg,
-        near_radius_deg,
-        scattered_fraction: scattered,
-        fft_size: (grid.fft_w, grid.fft_h),
-        veil_at_centre_cd_m2: centre(&lum[1]),
-        veil_at_centre_scotopic_cd_m2: centre(&lum[3]),
-        mean_veil_cd_m2: mean_veil,
-    };
-    Ok(report)
+}
+
+/// Where a pixel looks: its azimuthal equidistant coordinates (degrees) and solid angle
+/// (sr), `None` outside the projection's domain ([`Geometry::look`]).
+type Look = Option<(f64, f64, f64)>;
+
+/// Everything the looks depend on, as bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct LooksKey {
+    projection: Projection,
+    scales: [u64; 4],
+    width: usize,
+    height: usize,
+}
+
+/// The looks of a `width × height` image: those of the top-left quarter (rows
+/// `0..⌈h/2⌉`, each its left `⌈w/2⌉` pixels), from which [`mirrored`] gives every pixel's.
+struct Looks<'a> {
+    quarter: &'a [Look],
+    width: usize,
+    height: usize,
+}
+
+impl<'a> Looks<'a> {
+    /// The looks for `geometry` on a `w × h` image, kept in `slot` (made unless they are
+    /// there for the same geometry).
+    fn of(
+        slot: &'a mut Option<(LooksKey, Vec<Look>)>,
+        geometry: &Geometry,
+        w: usize,
+        h: usize,
+    ) -> Self {
+        let key = LooksKey {
+            projection: geometry.projection,
+            scales: [geometry.sx, geometry.sy, geometry.cx, geometry.cy].map(f64::to_bits),
+            width: w,
+            height: h,
+        };
+        if slot.as_ref().is_none_or(|(k, _)| *k != key) {
+            let mut quarter = slot.take().map(|(_, v)| v).unwrap_or_default();
+            let half = w.div_ceil(2);
+            quarter.clear();
+            quarter.resize(half * h.div_ceil(2), None);
+            let row = |(j, row): (usize, &mut [Look])| geometry.row_looks(j, row);
+            #[cfg(feature = "rayon")]
+            {
+                use rayon::prelude::*;
+                quarter.par_chunks_mut(half).enumerate().for_each(row);
+            }
+            #[cfg(not(feature = "rayon"))]
+            quarter.chunks_mut(half).enumerate().for_each(row);
+            *slot = Some((key, quarter));
+        }
+        let (_, quarter) = slot.as_ref().expect("filled above");
+        Looks {
+            quarter,
+            width: w,
+            height: h,
+        }
+    }
+
+    /// The left half of row `j`'s looks, and whether `b` is to be negated (the rows of
+    /// the lower half are their mirror rows' with `b` negated).
+    #[inline]
+    fn row(&self, j: usize) -> (&'a [Look], bool) {
+        let half = self.width.div_ceil(2);
+        let (q, flip_b) = if j < self.height.div_ceil(2) {
+            (j, false)
+        } else {
+            (self.height - 1 - j, true)
+        };
+        (&self.quarter[q * half..(q + 1) * half], flip_b)
+    }
 }
 
 /// Where every pixel looks: azimuthal equidistant coordinates about the view axis, in
@@ -471,28 +663,24 @@ impl Geometry {
         }
     }
 
-    /// [`Geometry::look`] for the left half of row `j` of a `w`-pixel-wide image (the
-    /// pixels `0..⌈w/2⌉`), into `looks`. The image centre lies between the two middle
-    /// pixels (or on the middle one), so pixel `w − 1 − i` sits at exactly the negated
-    /// offsets of pixel `i`, and every projection's look is odd in each offset: the right
-    /// half, and row `h − 1 − j`, follow by a change of sign ([`mirrored`]). Each
-    /// transcendental is then evaluated once for two pixels (four in [`Grid::splat`]).
-    fn row_looks(&self, j: usize, w: usize, looks: &mut Vec<Option<(f64, f64, f64)>>) {
+    /// [`Geometry::look`] for the left half of row `j` of an image (the pixels
+    /// `0..⌈w/2⌉` of a `w`-pixel-wide one: `looks.len()` of them). The image centre lies
+    /// between the two middle pixels (or on the middle one), so pixel `w − 1 − i` sits at
+    /// exactly the negated offsets of pixel `i`, and every projection's look is odd in
+    /// each offset: the right half, and row `h − 1 − j`, follow by a change of sign
+    /// ([`mirrored`]). Each transcendental is then evaluated once for four pixels.
+    fn row_looks(&self, j: usize, looks: &mut [Look]) {
         let py = j as f64 + 0.5;
-        looks.clear();
-        looks.extend((0..w.div_ceil(2)).map(|i| self.look(i as f64 + 0.5, py)));
+        for (i, look) in looks.iter_mut().enumerate() {
+            *look = self.look(i as f64 + 0.5, py);
+        }
     }
 }
 
 /// Pixel `i`'s look from the left half-row `looks` of [`Geometry::row_looks`] (of the
 /// mirrored row when `flip_b`), for an image `w` pixels wide.
 #[inline]
-fn mirrored(
-    looks: &[Option<(f64, f64, f64)>],
-    i: usize,
-    w: usize,
-    flip_b: bool,
-) -> Option<(f64, f64, f64)> {
+fn mirrored(looks: &[Look], i: usize, w: usize, flip_b: bool) -> Look {
     let (q, flip_a) = if i < looks.len() {
         (i, false)
     } else {
@@ -522,6 +710,14 @@ fn spreads(v: [f32; 4]) -> bool {
     valid(v) & v.iter().fold(false, |any, &c| any | (c != 0.0))
 }
 
+/// The luminance planes the stage spreads: X, Y, Z and scotopic.
+const PLANES: usize = 4;
+
+/// One grid cell's values for the four planes, kept together: a pixel's bilinear splat
+/// and read-back then touch four cells of four lanes (one vector each) instead of
+/// sixteen values in four grids, with one bounds check per cell.
+type Cell = [f64; PLANES];
+
 /// The angular grid the convolution runs on.
 #[derive(Debug)]
 struct Grid {
@@ -539,6 +735,7 @@ struct Grid {
 
 /// Spectrum of the kernel, column-major over the half spectrum (`fft_w/2+1` columns of
 /// `fft_h`).
+#[derive(Clone)]
 struct Spectrum(Vec<Complex<f64>>);
 
 /// Everything a kernel's spectrum depends on: the grid's size and cell and the observer
@@ -555,13 +752,71 @@ struct KernelKey {
     pigmentation: u64,
 }
 
-/// The last kernel spectrum made, with its key: the frames of a video or a sequence, and
-/// the viewer's, share their view and observer, so each would make the same kernel (about
-/// 9 % of the stage at 1080p: 160 of 1956 million instructions per call). One entry,
-/// at most one padded grid of complex values (under 10 MB: the grid is bounded by
-/// [`MAX_GRID_CELLS`]); a call with another key makes its own and keeps it instead.
-static LAST_KERNEL: std::sync::Mutex<Option<(KernelKey, std::sync::Arc<Spectrum>)>> =
-    std::sync::Mutex::new(None);
+/// The FFT plans for one padded grid size.
+#[derive(Clone)]
+struct Ffts {
+    fw: usize,
+    fh: usize,
+    row_forward: std::sync::Arc<dyn realfft::RealToComplex<f64>>,
+    row_inverse: std::sync::Arc<dyn realfft::ComplexToReal<f64>>,
+    col_forward: std::sync::Arc<dyn rustfft::Fft<f64>>,
+    col_inverse: std::sync::Arc<dyn rustfft::Fft<f64>>,
+}
+
+impl Ffts {
+    /// The plans for `grid`'s FFT size, kept in `slot` (planned unless they are there).
+    fn for_grid<'a>(slot: &'a mut Option<Ffts>, grid: &Grid) -> &'a Ffts {
+        let (fw, fh) = (grid.fft_w, grid.fft_h);
+        if slot.as_ref().is_none_or(|f| (f.fw, f.fh) != (fw, fh)) {
+            let (mut rows, mut cols) = (RealFftPlanner::<f64>::new(), FftPlanner::<f64>::new());
+            *slot = Some(Ffts {
+                fw,
+                fh,
+                row_forward: rows.plan_fft_forward(fw),
+                row_inverse: rows.plan_fft_inverse(fw),
+                col_forward: cols.plan_fft_forward(fh),
+                col_inverse: cols.plan_fft_inverse(fh),
+            });
+        }
+        slot.as_ref().expect("filled above")
+    }
+
+    /// 2-D forward FFT of the real `fw × fh` array `data` (only its first `rows` rows may
+    /// be non-zero; its rows are used as scratch) into `cols`, column-major over the half
+    /// spectrum (`fw/2 + 1` columns of `fh`).
+    fn forward(&self, data: &mut [f64], rows: usize, cols: &mut Vec<Complex<f64>>) {
+        let (fw, fh) = (self.fw, self.fh);
+        let zero = Complex::new(0.0, 0.0);
+        cols.clear();
+        cols.resize((fw / 2 + 1) * fh, zero);
+        let mut row_out = self.row_forward.make_output_vec();
+        let mut scratch = self.row_forward.make_scratch_vec();
+        for y in 0..rows {
+            let row = &mut data[y * fw..(y + 1) * fw];
+            if row.iter().all(|v| *v == 0.0) {
+                continue;
+            }
+            self.row_forward
+                .process_with_scratch(row, &mut row_out, &mut scratch)
+                .expect("FFT buffers sized by their plan");
+            for (x, v) in row_out.iter().enumerate() {
+                cols[x * fh + y] = *v;
+            }
+        }
+        let mut scratch = vec![zero; self.col_forward.get_inplace_scratch_len()];
+        for col in cols.chunks_exact_mut(fh) {
+            self.col_forward.process_with_scratch(col, &mut scratch);
+        }
+    }
+}
+
+/// One plane's FFT buffers: the padded grid, its half spectrum, the veil on the grid.
+#[derive(Clone, Default)]
+struct PlaneFft {
+    padded: Vec<f64>,
+    cols: Vec<Complex<f64>>,
+    received: Vec<f64>,
+}
 
 impl Grid {
     fn new(geometry: &Geometry, view: &View, w: usize, h: usize) -> Result<Self> {
@@ -641,22 +896,47 @@ impl Grid {
         ]
     }
 
-    fn sample(&self, plane: &[f64], at: (f64, f64)) -> f64 {
-        self.bilinear(at).iter().map(|(k, w)| plane[*k] * w).sum()
+    /// The four planes' values at `at` (grid coordinates), read bilinearly from `cells`:
+    /// each plane's four weighted cells summed in order from `-0.0` (as `f64`'s `Sum`).
+    #[inline(always)]
+    fn sample(&self, cells: &[Cell], at: (f64, f64)) -> Cell {
+        let mut sum = [-0.0; PLANES];
+        for (k, w) in self.bilinear(at) {
+            let c = &cells[k];
+            for p in 0..PLANES {
+                sum[p] += c[p] * w;
+            }
+        }
+        sum
     }
 
     /// The flux `L·Ω` (cd/m²·sr = lux) of every valid pixel, bilinearly splatted onto the
-    /// grid, for each of the four planes.
-    fn splat(&self, geometry: &Geometry, planes: [&[f32]; 4], w: usize, h: usize) -> [Vec<f64>; 4] {
+    /// grid, for the four planes together: one grid per band of rows in `bands` (reused),
+    /// summed into the first, which is returned.
+    fn splat<'a>(
+        &self,
+        looks: &Looks,
+        planes: [&[f32]; PLANES],
+        bands: &'a mut Vec<Vec<Cell>>,
+    ) -> &'a [Cell] {
+        let (w, h) = (looks.width, looks.height);
         let cells = self.nx * self.ny;
-        let empty = || std::array::from_fn::<Vec<f64>, 4, _>(|_| vec![0.0; cells]);
         // Rows are taken in mirrored pairs (j, h − 1 − j), which share their looks.
         let pairs = h.div_ceil(2);
-        let band = |range: std::ops::Range<usize>| {
-            let mut acc = empty();
-            let mut looks = Vec::new();
-            for jp in range {
-                geometry.row_looks(jp, w, &mut looks);
+        // One band of row pairs per thread: each band fills a grid of its own (the four
+        // planes of the whole grid), so more bands than threads would only add grids to
+        // clear and to sum.
+        #[cfg(feature = "rayon")]
+        let count = rayon::current_num_threads().clamp(1, pairs.max(1));
+        #[cfg(not(feature = "rayon"))]
+        let count = 1;
+        bands.truncate(count);
+        bands.resize_with(count, Vec::new);
+        let band = |(b, acc): (usize, &mut Vec<Cell>)| {
+            acc.clear();
+            acc.resize(cells, [0.0; PLANES]);
+            for jp in b * pairs / count..(b + 1) * pairs / count {
+                let (row_looks, _) = looks.row(jp);
                 let mirror = h - 1 - jp;
                 for (j, flip_b) in [(jp, false), (mirror, true)] {
                     if flip_b && mirror == jp {
@@ -668,52 +948,51 @@ impl Grid {
                         if !spreads(v) {
                             continue;
                         }
-                        let Some((a, b, omega)) = mirrored(&looks, i, w, flip_b) else {
+                        let Some((a, b, omega)) = mirrored(row_looks, i, w, flip_b) else {
                             continue;
                         };
+                        let v = v.map(f64::from);
                         for (cell, wt) in self.bilinear(self.to_grid(a, b)) {
                             let f = wt * omega;
-                            for (acc, v) in acc.iter_mut().zip(v) {
-                                acc[cell] += f * v as f64;
+                            let acc = &mut acc[cell];
+                            for p in 0..PLANES {
+                                acc[p] += f * v[p];
                             }
                         }
                     }
                 }
             }
-            acc
-        };
-        // One band of row pairs per thread: each band fills grids of its own (four planes
-        // of the whole grid), so more bands than threads would only add grids to clear
-        // and to sum.
-        #[cfg(feature = "rayon")]
-        let bands = rayon::current_num_threads().clamp(1, pairs.max(1));
-        #[cfg(not(feature = "rayon"))]
-        let bands = 1;
-        let range = |b: usize| b * pairs / bands..(b + 1) * pairs / bands;
-        let add = |mut a: [Vec<f64>; 4], b: [Vec<f64>; 4]| {
-            for (a, b) in a.iter_mut().zip(&b) {
-                a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
-            }
-            a
         };
         #[cfg(feature = "rayon")]
         {
             use rayon::prelude::*;
-            (0..bands)
-                .into_par_iter()
-                .map(|b| band(range(b)))
-                .reduce_with(add)
-                .unwrap_or_else(empty)
+            bands.par_iter_mut().enumerate().for_each(band);
         }
         #[cfg(not(feature = "rayon"))]
-        {
-            (0..bands).map(|b| band(range(b))).fold(empty(), add)
+        bands.iter_mut().enumerate().for_each(band);
+        // In band order, so that the sum does not depend on how the pool ran the bands.
+        let (first, rest) = bands.split_first_mut().expect("at least one band");
+        for other in rest.iter() {
+            for (a, b) in first.iter_mut().zip(other) {
+                for p in 0..PLANES {
+                    a[p] += b[p];
+                }
+            }
         }
+        first
     }
 
     /// [`Grid::kernel_spectrum`] for `glare` (its normaliser `norm` and near radius
-    /// `near_deg`), the one made last when it was made for the same grid and observer.
-    fn kernel(&self, glare: &Glare, norm: f64, near_deg: f64) -> std::sync::Arc<Spectrum> {
+    /// `near_deg`), kept in `slot` (made unless it is there for the same grid and
+    /// observer).
+    fn kernel<'a>(
+        &self,
+        slot: &'a mut Option<(KernelKey, Spectrum)>,
+        ffts: &Ffts,
+        glare: &Glare,
+        norm: f64,
+        near_deg: f64,
+    ) -> &'a Spectrum {
         let key = KernelKey {
             nx: self.nx,
             ny: self.ny,
@@ -723,24 +1002,17 @@ impl Grid {
             age_years: glare.age_years.to_bits(),
             pigmentation: glare.pigmentation.to_bits(),
         };
-        // A poisoned lock (a panic elsewhere while it was held) holds a whole entry or
-        // none: its value is still good.
-        let lock = || LAST_KERNEL.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((k, spectrum)) = lock().as_ref()
-            && *k == key
-        {
-            return std::sync::Arc::clone(spectrum);
+        if slot.as_ref().is_none_or(|(k, _)| *k != key) {
+            *slot = None;
+            *slot = Some((key, self.kernel_spectrum(ffts, glare, norm, near_deg)));
         }
-        // Made outside the lock, so that other threads' look-ups do not wait for it.
-        let spectrum = std::sync::Arc::new(self.kernel_spectrum(glare, norm, near_deg));
-        *lock() = Some((key, std::sync::Arc::clone(&spectrum)));
-        spectrum
+        &slot.as_ref().expect("filled above").1
     }
 
     /// The kernel: the normalised GSF (sr⁻¹) at each cell offset, averaged over sub-samples
     /// near the centre where it is steep, zero within the near radius and past 90°;
     /// transformed. Convolved with the flux per cell (lux) it gives the veil (cd/m²).
-    fn kernel_spectrum(&self, glare: &Glare, norm: f64, near_deg: f64) -> Spectrum {
+    fn kernel_spectrum(&self, ffts: &Ffts, glare: &Glare, norm: f64, near_deg: f64) -> Spectrum {
         let (fw, fh) = (self.fft_w, self.fft_h);
         let mut k = vec![0.0f64; fw * fh];
         let g = self.cell_deg;
@@ -816,62 +1088,53 @@ impl Grid {
                 sharpened[i] += deficit * k[i] / ring;
             }
         }
-        let spectrum = self.forward(sharpened);
+        let mut spectrum = Vec::new();
+        ffts.forward(&mut sharpened, fh, &mut spectrum);
         Spectrum(spectrum)
     }
 
-    /// 2-D forward FFT of a real `fft_w × fft_h` array (only the first `rows` rows may be
-    /// non-zero), returned column-major over the half spectrum.
-    fn forward(&self, mut data: Vec<f64>) -> Vec<Complex<f64>> {
-        let (fw, fh) = (self.fft_w, self.fft_h);
-        let cw = fw / 2 + 1;
-        let row_fft = RealFftPlanner::<f64>::new().plan_fft_forward(fw);
-        let col_fft = FftPlanner::<f64>::new().plan_fft_forward(fh);
-        let mut cols = vec![Complex::new(0.0, 0.0); cw * fh];
-        let mut row_out = row_fft.make_output_vec();
-        let mut scratch = row_fft.make_scratch_vec();
-        for y in 0..fh {
-            let row = &mut data[y * fw..(y + 1) * fw];
-            if row.iter().all(|v| *v == 0.0) {
-                continue;
-            }
-            row_fft
-                .process_with_scratch(row, &mut row_out, &mut scratch)
-                .expect("FFT buffers sized by their plan");
-            for (x, v) in row_out.iter().enumerate() {
-                cols[x * fh + y] = *v;
-            }
-        }
-        let mut scratch = vec![Complex::new(0.0, 0.0); col_fft.get_inplace_scratch_len()];
-        for col in cols.chunks_exact_mut(fh) {
-            col_fft.process_with_scratch(col, &mut scratch);
-        }
-        cols
-    }
-
-    /// Linear convolution of the grid's flux (lux) with the kernel: the veil (cd/m²).
-    fn convolve(&self, flux: &[f64], kernel: &Spectrum) -> Vec<f64> {
+    /// Linear convolution of plane `plane` of the grid's flux (lux) with the kernel: the
+    /// veil (cd/m²), into `buffers.received`.
+    fn convolve(
+        &self,
+        flux: &[Cell],
+        plane: usize,
+        kernel: &Spectrum,
+        ffts: &Ffts,
+        buffers: &mut PlaneFft,
+    ) {
         let (fw, fh, nx, ny) = (self.fft_w, self.fft_h, self.nx, self.ny);
-        let mut padded = vec![0.0f64; fw * fh];
+        let PlaneFft {
+            padded,
+            cols,
+            received,
+        } = buffers;
+        // Rows past the grid stay zero (the forward transform skips them); the grid's
+        // rows are written whole.
+        padded.clear();
+        padded.resize(fw * fh, 0.0);
         for y in 0..ny {
-            padded[y * fw..y * fw + nx].copy_from_slice(&flux[y * nx..(y + 1) * nx]);
+            let (row, pad) = padded[y * fw..(y + 1) * fw].split_at_mut(nx);
+            for (p, c) in row.iter_mut().zip(&flux[y * nx..(y + 1) * nx]) {
+                *p = c[plane];
+            }
+            pad.fill(0.0);
         }
-        let mut cols = self.forward(padded);
+        ffts.forward(padded, ny, cols);
         let scale = 1.0 / (fw * fh) as f64;
         for (c, k) in cols.iter_mut().zip(&kernel.0) {
             *c *= k * scale;
         }
         let cw = fw / 2 + 1;
-        let col_ifft = FftPlanner::<f64>::new().plan_fft_inverse(fh);
-        let mut scratch = vec![Complex::new(0.0, 0.0); col_ifft.get_inplace_scratch_len()];
+        let mut scratch = vec![Complex::new(0.0, 0.0); ffts.col_inverse.get_inplace_scratch_len()];
         for col in cols.chunks_exact_mut(fh) {
-            col_ifft.process_with_scratch(col, &mut scratch);
+            ffts.col_inverse.process_with_scratch(col, &mut scratch);
         }
-        let row_ifft = RealFftPlanner::<f64>::new().plan_fft_inverse(fw);
-        let mut row_in = row_ifft.make_input_vec();
-        let mut row_out = row_ifft.make_output_vec();
-        let mut scratch = row_ifft.make_scratch_vec();
-        let mut received = vec![0.0f64; nx * ny];
+        let mut row_in = ffts.row_inverse.make_input_vec();
+        let mut row_out = ffts.row_inverse.make_output_vec();
+        let mut scratch = ffts.row_inverse.make_scratch_vec();
+        received.clear();
+        received.resize(nx * ny, 0.0);
         for y in 0..ny {
             for (x, v) in row_in.iter_mut().enumerate() {
                 *v = cols[x * fh + y];
@@ -881,7 +1144,7 @@ impl Grid {
             if fw % 2 == 0 {
                 row_in[cw - 1].im = 0.0;
             }
-            row_ifft
+            ffts.row_inverse
                 .process_with_scratch(&mut row_in, &mut row_out, &mut scratch)
                 .expect("FFT buffers sized by their plan");
             // Round-off far from any light can dip just below zero.
@@ -889,43 +1152,40 @@ impl Grid {
                 *r = v.max(0.0);
             }
         }
-        received
     }
 
     /// `plane = keep·plane + veil` at every valid pixel with finite, non-negative channels;
     /// returns the mean photopic veil over the image.
     fn add_veil(
         &self,
-        geometry: &Geometry,
-        width: usize,
-        planes: [&mut Vec<f32>; 4],
-        veils: [&[f64]; 4],
+        looks: &Looks,
+        planes: [&mut Vec<f32>; PLANES],
+        veils: &[Cell],
         keep: f32,
     ) -> f64 {
         let [x, y, z, s] = planes;
         let n = x.len() as f64;
-        let row = |looks: &mut Vec<_>, (j, (((x, y), z), s)): RowPlanes| {
-            geometry.row_looks(j, width, looks);
+        let width = looks.width;
+        let row = |(j, (((x, y), z), s)): RowPlanes| {
+            let (row_looks, flip_b) = looks.row(j);
             let mut sum = 0.0;
             for i in 0..x.len() {
                 let px = [x[i], y[i], z[i], s[i]];
                 if !valid(px) {
                     continue;
                 }
-                let Some((a, b, _)) = mirrored(looks, i, width, false) else {
+                let Some((a, b, _)) = mirrored(row_looks, i, width, flip_b) else {
                     continue;
                 };
-                let weights = self.bilinear(self.to_grid(a, b));
-                let veil = |plane: &[f64]| weights.iter().map(|(k, w)| plane[*k] * w).sum::<f64>();
-                let vy = veil(veils[1]);
-                sum += vy;
+                let veil = self.sample(veils, self.to_grid(a, b));
+                sum += veil[1];
                 // In f64, saturating at f32::MAX: near several f32::MAX pixels the sum
                 // exceeds the f32 range (it became +inf, then a black, "non-finite" pixel).
                 let add = |c: f32, v: f64| saturating_f32(f64::from(keep) * f64::from(c) + v);
-                x[i] = add(px[0], veil(veils[0]));
-                y[i] = add(px[1], vy);
-                z[i] = add(px[2], veil(veils[2]));
-                s[i] = add(px[3], veil(veils[3]));
+                x[i] = add(px[0], veil[0]);
+                y[i] = add(px[1], veil[1]);
+                z[i] = add(px[2], veil[2]);
+                s[i] = add(px[3], veil[3]);
             }
             sum
         };
@@ -937,7 +1197,7 @@ impl Grid {
                 .zip(z.par_chunks_mut(width))
                 .zip(s.par_chunks_mut(width))
                 .enumerate()
-                .map_init(Vec::new, row)
+                .map(row)
                 .sum()
         };
         #[cfg(not(feature = "rayon"))]
@@ -947,10 +1207,7 @@ impl Grid {
             .zip(z.chunks_mut(width))
             .zip(s.chunks_mut(width))
             .enumerate()
-            .map({
-                let mut looks = Vec::new();
-                move |r| row(&mut looks, r)
-            })
+            .map(row)
             .sum();
         total / n
     }
@@ -989,9 +1246,7 @@ mod tests {
     /// The kept kernel is the one made for the same grid and observer: after a kernel
     /// for one, a kernel for another that differs in one thing only (age, pigmentation,
     /// cell, grid or FFT size) is that one's own, bit for bit; asked again for the same,
-    /// the same values. (Other tests running beside this one can replace the kept
-    /// kernel between two calls; a kernel then made afresh is the same bits, so this
-    /// cannot fail because of them.)
+    /// the same values.
     #[test]
     fn kept_kernel_is_the_one_for_its_grid_and_observer() {
         let base = Grid {
@@ -1005,11 +1260,13 @@ mod tests {
             fft_h: 60,
         };
         let observer = Glare::default();
-        let fresh = |grid: &Grid, glare: &Glare| {
+        let (mut slot, mut plans) = (None, None);
+        let mut fresh = |grid: &Grid, glare: &Glare| {
             let norm = glare.hemisphere_integral();
             let near = NEAR_RADIUS_CELLS * grid.cell_deg;
-            let kept = grid.kernel(glare, norm, near);
-            let made = grid.kernel_spectrum(glare, norm, near);
+            let ffts = Ffts::for_grid(&mut plans, grid);
+            let kept = grid.kernel(&mut slot, ffts, glare, norm, near);
+            let made = grid.kernel_spectrum(Ffts::for_grid(&mut None, grid), glare, norm, near);
             assert_eq!(kept.0.len(), made.0.len());
             for (a, b) in kept.0.iter().zip(&made.0) {
                 assert!(
@@ -1145,10 +1402,10 @@ mod tests {
                     vertical_deg,
                 };
                 let geometry = Geometry::new(&view, w, h).unwrap();
-                let mut looks = Vec::new();
+                let mut looks = vec![None; w.div_ceil(2)];
                 let mut outside = 0;
                 for j in 0..h.div_ceil(2) {
-                    geometry.row_looks(j, w, &mut looks);
+                    geometry.row_looks(j, &mut looks);
                     for (row, flip_b) in [(j, false), (h - 1 - j, true)] {
                         for i in 0..w {
                             let direct = geometry.look(i as f64 + 0.5, row as f64 + 0.5);

@@ -22,7 +22,9 @@ impl std::fmt::Debug for Samples<'_> {
 /// * `scotopic`: the scotopic luminance in scotopic cd/m² (CIE 1951 V'(λ), K'm = 1700 lm/W),
 ///   when the source carried it (the paper's own file format does). When it is `None`, the
 ///   operator estimates it from XYZ (see [`scotopic`](crate::scotopic)).
-#[derive(Clone, PartialEq)]
+///
+/// `clone_from` reuses the target's planes (no allocation when they are large enough).
+#[derive(PartialEq)]
 pub struct HdrImage {
     /// Width in pixels.
     pub width: usize,
@@ -49,6 +51,38 @@ pub struct HdrImage {
     /// layout), or `None` when nothing says. The operator adapts the cone image from it to
     /// the display white ([`colour::WhitePoint::Auto`](crate::colour::WhitePoint)).
     pub adopted_white: Option<crate::colour::Xy>,
+}
+
+impl Clone for HdrImage {
+    fn clone(&self) -> Self {
+        let mut out = HdrImage::zeros(0, 0);
+        out.clone_from(self);
+        out
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        // Every field named, so that a field added to the image is not forgotten here.
+        let HdrImage {
+            width,
+            height,
+            x,
+            y,
+            z,
+            scotopic,
+            view,
+            absolute_units,
+            adopted_white,
+        } = source;
+        self.width = *width;
+        self.height = *height;
+        self.x.clone_from(x);
+        self.y.clone_from(y);
+        self.z.clone_from(z);
+        self.scotopic.clone_from(scotopic);
+        self.view = *view;
+        self.absolute_units = *absolute_units;
+        self.adopted_white = *adopted_white;
+    }
 }
 
 /// The image's size, units, view and white, and of each plane its number of samples

@@ -604,6 +604,43 @@ pub fn prepare<'a>(
     Ok((Cow::Owned(retina), report))
 }
 
+/// [`prepare`] for frames of one size and view (a video, a sequence, the viewer): the
+/// scene stages keep what they can reuse from frame to frame in `workspace` (the glare
+/// stage's looks, kernel and buffers, and the scene it returns), with the same results
+/// bit for bit. Returns the scene to apply the mapping to (the input itself when no
+/// scene stage is on) and the report.
+///
+/// ```
+/// use visadapt::{HdrImage, glare::{Glare, Workspace}, operator::{prepare, prepare_reusing, ViewingConditions}};
+/// let (w, h) = (160, 90);
+/// let conditions = ViewingConditions { glare: Some(Glare::default()), ..Default::default() };
+/// let mut workspace = Workspace::new();
+/// for level in [0.01, 0.02] {
+///     let mut scene = HdrImage::zeros(w, h);
+///     for i in 0..w * h {
+///         let l = if i == 45 * w + 100 { 2e6 } else { level };
+///         scene.x[i] = 0.9505 * l; scene.y[i] = l; scene.z[i] = 1.089 * l;
+///     }
+///     let (retina, report) = prepare_reusing(&scene, &conditions, &mut workspace)?;
+///     let (fresh, fresh_report) = prepare(&scene, &conditions)?;
+///     assert!(retina.y == fresh.y && report.world_adaptation_cd_m2 == fresh_report.world_adaptation_cd_m2);
+/// }
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn prepare_reusing<'a>(
+    image: &'a HdrImage,
+    conditions: &ViewingConditions,
+    workspace: &'a mut glare::Workspace,
+) -> Result<(&'a HdrImage, Report)> {
+    let Some(g) = &conditions.glare else {
+        return Ok((image, plan(image, conditions)?));
+    };
+    let without = plan(image, conditions)?;
+    let (retina, veil) = workspace.apply(image, &without.view, g)?;
+    let report = with_glare(plan(retina, conditions)?, &without, veil);
+    Ok((retina, report))
+}
+
 /// [`prepare`], consuming the image: the glare stage adds its veil over the image's own
 /// planes ([`glare::apply_in_place`]) instead of making a second image. Returns the scene
 /// to apply the mapping to and the report, the same as [`prepare`]'s.

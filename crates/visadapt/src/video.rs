@@ -68,6 +68,7 @@
 //! # Ok::<(), visadapt::Error>(())
 //! ```
 
+use crate::glare;
 use crate::io::display::PngCompression;
 use crate::io::{self, OutputFormat};
 use crate::local::AdaptationMap;
@@ -90,6 +91,8 @@ pub struct Observer {
     frames: u64,
     /// The adaptation map of local adaptation, its planes kept from frame to frame.
     map: AdaptationMap,
+    /// The scene stages' workspace (glare), kept from frame to frame.
+    scene: glare::Workspace,
 }
 
 /// What the model did with one frame.
@@ -127,6 +130,7 @@ impl Observer {
             size: None,
             frames: 0,
             map: AdaptationMap::default(),
+            scene: glare::Workspace::new(),
         })
     }
 
@@ -156,7 +160,7 @@ impl Observer {
             }
             _ => {}
         }
-        let (scene, report) = operator::prepare(image, &self.conditions)?;
+        let (scene, report) = operator::prepare_reusing(image, &self.conditions, &mut self.scene)?;
         let state = match &self.state {
             None => Adaptation::adapted(
                 report.world_adaptation_cd_m2,
@@ -170,7 +174,7 @@ impl Observer {
             }
         };
         let (mapping, stats) = operator::apply_state_reusing(
-            &scene,
+            scene,
             &report,
             &state,
             &self.conditions,

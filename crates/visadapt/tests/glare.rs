@@ -552,3 +552,92 @@ fn the_headlight_hides_the_pedestrian() {
     assert!(local_veiled.max_jnd < 1.0, "{}", local_veiled.max_jnd);
     assert!(veil_only.max_jnd > 2.0 && veil_only.max_jnd < seen.max_jnd);
 }
+
+/// A workspace gives a fresh call's results bit for bit, whatever it was used for before:
+/// a sequence of calls that changes one thing at a time (the scene, with rows of the
+/// grid left without light; the size; the field of view; the projection; the observer;
+/// a scene with its own scotopic plane), each compared with [`glare::apply`] on a fresh
+/// workspace, through both [`glare::Workspace::apply`] and `apply_in_place`.
+#[test]
+fn a_workspace_gives_fresh_results_bit_for_bit() {
+    // A textured field with a light; `dark_rows` rows at the top without any light.
+    let scene = |w: usize, h: usize, dark_rows: usize, scotopic: bool| {
+        let mut s = one_source(w, h, w / 3, h * 2 / 3, 3e5);
+        for k in dark_rows * w..w * h {
+            if s.y[k] == 0.0 {
+                let l = 0.01 + 0.02 * ((k * 7919) % 13) as f32;
+                s.x[k] = 0.9505 * l;
+                s.y[k] = l;
+                s.z[k] = 1.089 * l;
+            }
+        }
+        if scotopic {
+            s.scotopic = Some(s.y.iter().map(|v| 1.7 * v).collect());
+        }
+        s
+    };
+    let older = Glare {
+        age_years: 70.0,
+        ..Glare::default()
+    };
+    let cases = [
+        (
+            scene(96, 64, 0, false),
+            View::perspective(50.0, 96, 64),
+            Glare::default(),
+        ),
+        (
+            scene(96, 64, 40, false),
+            View::perspective(50.0, 96, 64),
+            Glare::default(),
+        ),
+        (
+            scene(96, 64, 0, false),
+            View::perspective(50.0, 96, 64),
+            Glare::default(),
+        ),
+        (
+            scene(80, 64, 0, false),
+            View::perspective(50.0, 80, 64),
+            Glare::default(),
+        ),
+        (
+            scene(80, 64, 0, false),
+            View::perspective(70.0, 80, 64),
+            Glare::default(),
+        ),
+        (scene(80, 64, 0, false), fisheye_180(), Glare::default()),
+        (scene(80, 64, 0, false), fisheye_180(), older),
+        (scene(80, 64, 10, true), fisheye_180(), older),
+        (
+            scene(96, 64, 0, false),
+            View::perspective(50.0, 96, 64),
+            Glare::default(),
+        ),
+    ];
+    let bits = |img: &HdrImage| -> Vec<u32> {
+        let s = img
+            .scotopic
+            .as_ref()
+            .expect("the stage writes a scotopic plane");
+        [&img.x, &img.y, &img.z, s]
+            .iter()
+            .flat_map(|p| p.iter().map(|v| v.to_bits()))
+            .collect()
+    };
+    let (mut workspace, mut in_place) = (glare::Workspace::new(), glare::Workspace::new());
+    for (n, (image, view, g)) in cases.iter().enumerate() {
+        let (fresh, fresh_report) = glare::apply(image, view, g).unwrap();
+        let (kept, report) = workspace.apply(image, view, g).unwrap();
+        assert!(bits(kept) == bits(&fresh), "case {n}: planes differ");
+        assert_eq!(report, fresh_report, "case {n}");
+        assert_eq!(kept.width, fresh.width);
+        let mut own = image.clone();
+        let report = in_place.apply_in_place(&mut own, view, g).unwrap();
+        assert!(
+            bits(&own) == bits(&fresh),
+            "case {n}: planes differ in place"
+        );
+        assert_eq!(report, fresh_report, "case {n} in place");
+    }
+}

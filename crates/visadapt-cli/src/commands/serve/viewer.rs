@@ -8,7 +8,7 @@
 
 use serde_json::{Value, json};
 use std::path::PathBuf;
-use visadapt::glare::Glare;
+use visadapt::glare::{self, Glare};
 use visadapt::local::{self, AdaptationMap, LocalAdaptation, LocalMapping, LocalReport};
 use visadapt::operator::{self, AdaptationMode, Mapping, PixelStats, Report, ViewingConditions};
 use visadapt::preview;
@@ -155,9 +155,12 @@ pub struct Viewer {
     /// `base` times `scaled_factor`, at full resolution.
     scaled: HdrImage,
     scaled_factor: Option<f64>,
-    /// With glare, the retinal image (`operator::prepare`) of the plan `retina_key`.
+    /// With glare, the retinal image (`operator::prepare_reusing`) of the plan
+    /// `retina_key`, and the glare stage's workspace (kept for the next plan: same size
+    /// and view).
     retina: HdrImage,
     retina_key: Option<PlanKey>,
+    scene_workspace: glare::Workspace,
     /// The local adaptation map of a plan's full-resolution scene.
     full_map: Option<(PlanKey, AdaptationMap)>,
     /// The local adaptation map of a plan's preview at a width.
@@ -200,6 +203,7 @@ impl Viewer {
             scaled_factor: None,
             retina: HdrImage::zeros(0, 0),
             retina_key: None,
+            scene_workspace: glare::Workspace::new(),
             full_map: None,
             preview_map: None,
             plans: Vec::new(),
@@ -317,8 +321,9 @@ impl Viewer {
             return Ok(operator::plan(&self.scaled, &conditions)?);
         }
         self.retina_key = None;
-        let (retina, report) = operator::prepare(&self.scaled, &conditions)?;
-        self.retina = retina.into_owned();
+        let (retina, report) =
+            operator::prepare_reusing(&self.scaled, &conditions, &mut self.scene_workspace)?;
+        self.retina.clone_from(retina);
         self.retina_key = Some(key);
         Ok(report)
     }
