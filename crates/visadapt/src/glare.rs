@@ -80,6 +80,7 @@
 //! and the rod adaptation.
 
 use crate::limits::saturating_f32;
+use crate::simd::Isa;
 use crate::{Error, HdrImage, Projection, Result, View};
 use realfft::RealFftPlanner;
 use rustfft::FftPlanner;
@@ -387,6 +388,17 @@ impl Workspace {
         view: &View,
         glare: &Glare,
     ) -> Result<VeilReport> {
+        self.apply_in_place_at(Isa::detect(), image, view, glare)
+    }
+
+    /// [`Workspace::apply_in_place`] with the per-pixel loops compiled for `isa`.
+    fn apply_in_place_at(
+        &mut self,
+        isa: Isa,
+        image: &mut HdrImage,
+        view: &View,
+        glare: &Glare,
+    ) -> Result<VeilReport> {
         image.check_consistent()?;
         glare.validate()?;
         let (w, h) = (image.width, image.height);
@@ -417,7 +429,12 @@ impl Workspace {
                 s
             }
         };
-        let flux = grid.splat(&looks, [&image.x, &image.y, &image.z, &scotopic], bands);
+        let flux = grid.splat(
+            isa,
+            &looks,
+            [&image.x, &image.y, &image.z, &scotopic],
+            bands,
+        );
         let veil = |(plane, buffers): (usize, &mut PlaneFft)| {
             grid.convolve(flux, plane, kernel, ffts, buffers);
         };
@@ -435,6 +452,7 @@ impl Workspace {
         let mut s_plane = scotopic;
         let keep = (1.0 - scattered) as f32;
         let mean_veil = grid.add_veil(
+            isa,
             &looks,
             [&mut image.x, &mut image.y, &mut image.z, &mut s_plane],
             veils,
@@ -529,7 +547,7 @@ impl<'a> Looks<'a> {
 
     /// The left half of row `j`'s looks, and whether `b` is to be negated (the rows of
     /// the lower half are their mirror rows' with `b` negated).
-    #[inline]
+    #[inline(always)]
     fn row(&self, j: usize) -> (&'a [Look], bool) {
         let half = self.width.div_ceil(2);
         let (q, flip_b) = if j < self.height.div_ceil(2) {
@@ -679,7 +697,7 @@ impl Geometry {
 
 /// Pixel `i`'s look from the left half-row `looks` of [`Geometry::row_looks`] (of the
 /// mirrored row when `flip_b`), for an image `w` pixels wide.
-#[inline]
+#[inline(always)]
 fn mirrored(looks: &[Look], i: usize, w: usize, flip_b: bool) -> Look {
     let (q, flip_a) = if i < looks.len() {
         (i, false)
@@ -867,13 +885,13 @@ impl Grid {
         })
     }
 
-    #[inline]
+    #[inline(always)]
     fn to_grid(&self, a: f64, b: f64) -> (f64, f64) {
         ((a - self.a0) / self.cell_deg, (b - self.b0) / self.cell_deg)
     }
 
     /// Bilinear weights: the four cells around `(gx, gy)` as (index, weight).
-    #[inline]
+    #[inline(always)]
     fn bilinear(&self, (gx, gy): (f64, f64)) -> [(usize, f64); 4] {
         // Through `i64`, not `usize`: on baseline x86-64 (no AVX-512) a conversion between
         // `f64` and an unsigned 64-bit integer is a sequence of instructions, one between
@@ -915,11 +933,12 @@ impl Grid {
     /// summed into the first, which is returned.
     fn splat<'a>(
         &self,
+        isa: Isa,
         looks: &Looks,
         planes: [&[f32]; PLANES],
         bands: &'a mut Vec<Vec<Cell>>,
     ) -> &'a [Cell] {
-        let (w, h) = (looks.width, looks.height);
+        let h = looks.height;
         let cells = self.nx * self.ny;
         // Rows are taken in mirrored pairs (j, h − 1 − j), which share their looks.
         let pairs = h.div_ceil(2);
@@ -935,33 +954,8 @@ impl Grid {
         let band = |(b, acc): (usize, &mut Vec<Cell>)| {
             acc.clear();
             acc.resize(cells, [0.0; PLANES]);
-            for jp in b * pairs / count..(b + 1) * pairs / count {
-                let (row_looks, _) = looks.row(jp);
-                let mirror = h - 1 - jp;
-                for (j, flip_b) in [(jp, false), (mirror, true)] {
-                    if flip_b && mirror == jp {
-                        continue;
-                    }
-                    for i in 0..w {
-                        let k = j * w + i;
-                        let v = [planes[0][k], planes[1][k], planes[2][k], planes[3][k]];
-                        if !spreads(v) {
-                            continue;
-                        }
-                        let Some((a, b, omega)) = mirrored(row_looks, i, w, flip_b) else {
-                            continue;
-                        };
-                        let v = v.map(f64::from);
-                        for (cell, wt) in self.bilinear(self.to_grid(a, b)) {
-                            let f = wt * omega;
-                            let acc = &mut acc[cell];
-                            for p in 0..PLANES {
-                                acc[p] += f * v[p];
-                            }
-                        }
-                    }
-                }
-            }
+            let pairs = b * pairs / count..(b + 1) * pairs / count;
+            crate::simd::at_level!(isa, self.splat_rows(looks, planes, pairs.clone(), acc));
         };
         #[cfg(feature = "rayon")]
         {
@@ -980,6 +974,49 @@ impl Grid {
             }
         }
         first
+    }
+
+    /// The splat of the row pairs `pairs` (rows `j` and `h − 1 − j` for each `j`) into
+    /// `acc`. Compiled for the dispatched instruction set, where a cell's four planes are
+    /// one vector of `f64` (AVX2): the same operations in the same order, so the same
+    /// results bit for bit (tested); on one thread at 1080p 119.5–120.7 → 105.4–107.0 ms
+    /// per call with the read-back's loop dispatched too.
+    #[inline(always)]
+    fn splat_rows(
+        &self,
+        looks: &Looks,
+        planes: [&[f32]; PLANES],
+        pairs: std::ops::Range<usize>,
+        acc: &mut [Cell],
+    ) {
+        let (w, h) = (looks.width, looks.height);
+        for jp in pairs {
+            let (row_looks, _) = looks.row(jp);
+            let mirror = h - 1 - jp;
+            for (j, flip_b) in [(jp, false), (mirror, true)] {
+                if flip_b && mirror == jp {
+                    continue;
+                }
+                for i in 0..w {
+                    let k = j * w + i;
+                    let v = [planes[0][k], planes[1][k], planes[2][k], planes[3][k]];
+                    if !spreads(v) {
+                        continue;
+                    }
+                    let Some((a, b, omega)) = mirrored(row_looks, i, w, flip_b) else {
+                        continue;
+                    };
+                    let v = v.map(f64::from);
+                    for (cell, wt) in self.bilinear(self.to_grid(a, b)) {
+                        let f = wt * omega;
+                        let acc = &mut acc[cell];
+                        for p in 0..PLANES {
+                            acc[p] += f * v[p];
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// [`Grid::kernel_spectrum`] for `glare` (its normaliser `norm` and near radius
@@ -1158,6 +1195,7 @@ impl Grid {
     /// returns the mean photopic veil over the image.
     fn add_veil(
         &self,
+        isa: Isa,
         looks: &Looks,
         planes: [&mut Vec<f32>; PLANES],
         veils: &[Cell],
@@ -1167,27 +1205,7 @@ impl Grid {
         let n = x.len() as f64;
         let width = looks.width;
         let row = |(j, (((x, y), z), s)): RowPlanes| {
-            let (row_looks, flip_b) = looks.row(j);
-            let mut sum = 0.0;
-            for i in 0..x.len() {
-                let px = [x[i], y[i], z[i], s[i]];
-                if !valid(px) {
-                    continue;
-                }
-                let Some((a, b, _)) = mirrored(row_looks, i, width, flip_b) else {
-                    continue;
-                };
-                let veil = self.sample(veils, self.to_grid(a, b));
-                sum += veil[1];
-                // In f64, saturating at f32::MAX: near several f32::MAX pixels the sum
-                // exceeds the f32 range (it became +inf, then a black, "non-finite" pixel).
-                let add = |c: f32, v: f64| saturating_f32(f64::from(keep) * f64::from(c) + v);
-                x[i] = add(px[0], veil[0]);
-                y[i] = add(px[1], veil[1]);
-                z[i] = add(px[2], veil[2]);
-                s[i] = add(px[3], veil[3]);
-            }
-            sum
+            crate::simd::at_level!(isa, self.veil_row(looks, j, [x, y, z, s], veils, keep))
         };
         #[cfg(feature = "rayon")]
         let total: f64 = {
@@ -1210,6 +1228,43 @@ impl Grid {
             .map(row)
             .sum();
         total / n
+    }
+}
+
+impl Grid {
+    /// [`Grid::add_veil`] on row `j` (its four planes `row`): returns the row's sum of the
+    /// photopic veil (compiled for the dispatched instruction set).
+    #[inline(always)]
+    fn veil_row(
+        &self,
+        looks: &Looks,
+        j: usize,
+        row: [&mut [f32]; PLANES],
+        veils: &[Cell],
+        keep: f32,
+    ) -> f64 {
+        let [x, y, z, s] = row;
+        let (row_looks, flip_b) = looks.row(j);
+        let mut sum = 0.0;
+        for i in 0..x.len() {
+            let px = [x[i], y[i], z[i], s[i]];
+            if !valid(px) {
+                continue;
+            }
+            let Some((a, b, _)) = mirrored(row_looks, i, looks.width, flip_b) else {
+                continue;
+            };
+            let veil = self.sample(veils, self.to_grid(a, b));
+            sum += veil[1];
+            // In f64, saturating at f32::MAX: near several f32::MAX pixels the sum
+            // exceeds the f32 range (it became +inf, then a black, "non-finite" pixel).
+            let add = |c: f32, v: f64| saturating_f32(f64::from(keep) * f64::from(c) + v);
+            x[i] = add(px[0], veil[0]);
+            y[i] = add(px[1], veil[1]);
+            z[i] = add(px[2], veil[2]);
+            s[i] = add(px[3], veil[3]);
+        }
+        sum
     }
 }
 
@@ -1242,6 +1297,48 @@ fn fft_friendly(min: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The per-pixel loops give the same planes and report bit for bit at every
+    /// instruction set this processor runs (they are compiled for each, with the same
+    /// operations in the same order), on an image of odd size with a light, a textured
+    /// field and pixels the stage passes through (negative, NaN, infinite).
+    #[test]
+    fn every_instruction_set_gives_the_same_bits() {
+        let (w, h) = (97, 61);
+        let mut scene = HdrImage::zeros(w, h);
+        let mut state = 12345u64;
+        for k in 0..w * h {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let l = (state >> 40) as f32 / (1u64 << 24) as f32 * 50.0;
+            (scene.x[k], scene.y[k], scene.z[k]) = (0.95 * l, l, 1.09 * l);
+        }
+        let source = 30 * w + 40;
+        (scene.x[source], scene.y[source], scene.z[source]) = (9.5e6, 1e7, 1.09e7);
+        scene.y[5] = -1.0;
+        scene.z[w + 7] = f32::NAN;
+        scene.x[2 * w + 9] = f32::INFINITY;
+        let view = View::perspective(55.0, w, h);
+        let run = |isa: Isa| {
+            let mut image = scene.clone();
+            let report = Workspace::new()
+                .apply_in_place_at(isa, &mut image, &view, &Glare::default())
+                .unwrap();
+            let s = image.scotopic.take().unwrap();
+            let bits: Vec<u32> = [image.x, image.y, image.z, s]
+                .iter()
+                .flat_map(|p| p.iter().map(|v| v.to_bits()))
+                .collect();
+            (bits, report)
+        };
+        let (bits, report) = run(Isa::Baseline);
+        for isa in Isa::all_available() {
+            let (other, other_report) = run(isa);
+            assert!(other == bits, "{isa:?}: planes differ from the baseline's");
+            assert_eq!(other_report, report, "{isa:?}");
+        }
+    }
 
     /// The kept kernel is the one made for the same grid and observer: after a kernel
     /// for one, a kernel for another that differs in one thing only (age, pigmentation,

@@ -19,7 +19,7 @@ pub const MIN_LUMINANCE_CD_M2: f64 = 1e-19;
 
 /// `v` as `f32`, saturating finite values at ±`f32::MAX` instead of overflowing to ±Inf
 /// (`as` rounds them to infinity); Inf and NaN pass through.
-#[inline]
+#[inline(always)]
 pub fn saturating_f32(v: f64) -> f32 {
     if v.is_finite() {
         v.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
