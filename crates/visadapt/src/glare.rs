@@ -1146,9 +1146,9 @@ impl Grid {
             cols,
             received,
         } = buffers;
-        // Rows past the grid stay zero (the forward transform skips them); the grid's
-        // rows are written whole.
-        padded.clear();
+        // The grid's rows are written whole; the rows past them are not read (the forward
+        // transform takes only the first `ny`), so whatever a call before left there
+        // stays.
         padded.resize(fw * fh, 0.0);
         for y in 0..ny {
             let (row, pad) = padded[y * fw..(y + 1) * fw].split_at_mut(nx);

@@ -420,6 +420,29 @@ impl DisplayImage {
 mod tests {
     use super::*;
 
+    /// `clone_from` gives an image equal to its source in every field, whatever the
+    /// target held before (larger or smaller planes, a scotopic plane or none, another
+    /// view, units and white), and reuses the target's planes when they are large enough.
+    #[test]
+    fn clone_from_copies_every_field_and_reuses_planes() {
+        let mut a = HdrImage::zeros(4, 3);
+        a.x[5] = 2.0;
+        a.scotopic = Some(vec![1.5; 12]);
+        a.view = Some(View::perspective(40.0, 4, 3));
+        a.absolute_units = true;
+        a.adopted_white = Some([0.3127, 0.329]);
+        let b = HdrImage::zeros(2, 2);
+        let mut target = HdrImage::zeros(5, 5);
+        for source in [&a, &b, &a, &a] {
+            target.clone_from(source);
+            assert!(target == *source);
+        }
+        let plane = target.y.as_ptr();
+        target.clone_from(&a);
+        assert_eq!(target.y.as_ptr(), plane, "the plane was reallocated");
+        assert!(a.clone() == a);
+    }
+
     /// `Debug` shows each plane's number of samples, not the samples (it printed all of
     /// them: megabytes of text for a photograph).
     #[test]
