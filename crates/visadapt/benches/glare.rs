@@ -1,9 +1,11 @@
 //! The glare stage against the acuity blur it sits beside, at 1920×1080 and 3840×2160:
-//! `glare::apply` (four planes: X, Y, Z and scotopic, splat, FFT convolution, read-back)
-//! and `blur::gaussian_blur_planes` (the operator's acuity stage on its three display
-//! planes) at sigma 2 px, a night scene's acuity blur at 60° (Eq. 7 at 0.01 cd/m²: ~0.06°,
-//! ~1.9 px at 1080p; the recursive blur's cost does not depend on sigma). Both in the same
-//! run, so their ratio holds on a shared machine. Throughput is in pixels.
+//! `glare::apply` (four planes: X, Y, Z and scotopic, splat, FFT convolution, read-back;
+//! with a fresh workspace, as one `map` runs it, and with one kept from call to call, as
+//! `video` runs it) and `blur::gaussian_blur_planes` (the operator's acuity stage on its
+//! three display planes) at sigma 2 px, a night scene's acuity blur at 60° (Eq. 7 at
+//! 0.01 cd/m²: ~0.06°, ~1.9 px at 1080p; the recursive blur's cost does not depend on
+//! sigma). Both in the same run, so their ratio holds on a shared machine. Throughput is
+//! in pixels.
 //!
 //! `cargo bench -p visadapt --bench glare -- --warm-up-time 1 --measurement-time 3`
 
@@ -43,6 +45,16 @@ fn bench(c: &mut Criterion) {
         let view = View::perspective(60.0, w, h);
         group.bench_function(BenchmarkId::new("glare", "4 planes"), |b| {
             b.iter(|| glare::apply(black_box(&scene), &view, &Glare::default()).unwrap());
+        });
+        // As a video's frames run it: a workspace kept from call to call.
+        let mut workspace = glare::Workspace::new();
+        group.bench_function(BenchmarkId::new("glare, workspace kept", "4 planes"), |b| {
+            b.iter(|| {
+                let (retina, report) = workspace
+                    .apply(black_box(&scene), &view, &Glare::default())
+                    .unwrap();
+                black_box((retina.y[0], report))
+            });
         });
         let planes = [scene.x.clone(), scene.y.clone(), scene.z.clone()];
         group.bench_function(BenchmarkId::new("acuity blur", "3 planes"), |b| {
