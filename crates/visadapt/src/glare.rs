@@ -304,10 +304,11 @@ pub fn apply_in_place(image: &mut HdrImage, view: &View, glare: &Glare) -> Resul
 /// rest follow by symmetry), the kernel's spectrum, the FFT plans, and the grids and FFT
 /// buffers of every plane, reused instead of allocated (and page-faulted in) afresh.
 /// Each is remade when what it depends on changes, so a workspace gives the same results
-/// bit for bit as a fresh one for any sequence of calls (tested). With a 60° view it
-/// holds about 86 MB at 1080p (the looks 17 MB, each plane's FFT buffers 12 MB) and
-/// 135 MB at 4K (the looks 66 MB; the grid is the same), and [`Workspace::apply`] keeps
-/// the retinal image besides.
+/// bit for bit as a fresh one for any sequence of calls (tested). With a 60° view on two
+/// threads it holds about 48 MB at 1080p (the looks 17 MB, the kernel's and two planes'
+/// spectra 5.4 MB each, the splat's two grids 5.1 MB each) and 98 MB at 4K (the looks
+/// 66 MB; the grid is the same), and [`Workspace::apply`] keeps the retinal image
+/// besides.
 ///
 /// ```
 /// use visadapt::{HdrImage, View, glare::{Glare, Workspace}};
@@ -332,12 +333,14 @@ pub struct Workspace {
     kernel: Option<(KernelKey, Spectrum)>,
     /// The FFT plans, for their sizes.
     ffts: Option<Ffts>,
-    /// Each splat band's grid (the first holds their sum after the splat).
+    /// Each splat band's grid (the first holds their sum after the splat, then the veil
+    /// of the four planes).
     bands: Vec<Vec<Cell>>,
-    /// Each plane's FFT buffers.
-    planes: [PlaneFft; PLANES],
-    /// The veil of the four planes, per grid cell.
-    veils: Vec<Cell>,
+    /// The spectra being convolved, one per thread that convolves planes (at most one
+    /// per plane).
+    spectra: Vec<Vec<Complex<f64>>>,
+    /// Each plane's veil on the grid.
+    received: [Vec<f64>; PLANES],
     /// The image [`Workspace::apply`] returns, its planes reused.
     retina: Option<HdrImage>,
 }
@@ -414,8 +417,8 @@ impl Workspace {
             kernel,
             ffts,
             bands,
-            planes,
-            veils,
+            spectra,
+            received,
             retina: _,
         } = self;
         let ffts = Ffts::for_grid(ffts, &grid);
@@ -437,19 +440,40 @@ impl Workspace {
             [&image.x, &image.y, &image.z, &scotopic],
             bands,
         );
-        let veil = |(plane, buffers): (usize, &mut PlaneFft)| {
-            grid.convolve(flux, plane, kernel, ffts, buffers);
+        // The planes in as many groups as threads (up to one each), a spectrum buffer per
+        // group (5.4 MB at 1080p): one per plane would hold twice what two threads use.
+        #[cfg(feature = "rayon")]
+        let threads = rayon::current_num_threads().clamp(1, PLANES);
+        #[cfg(not(feature = "rayon"))]
+        let threads = 1;
+        let per_group = PLANES.div_ceil(threads);
+        spectra.truncate(PLANES.div_ceil(per_group));
+        spectra.resize_with(PLANES.div_ceil(per_group), Vec::new);
+        let group = |(g, (outs, cols)): (usize, (&mut [Vec<f64>], &mut Vec<Complex<f64>>))| {
+            for (i, out) in outs.iter_mut().enumerate() {
+                grid.convolve(flux, g * per_group + i, kernel, ffts, cols, out);
+            }
         };
         #[cfg(feature = "rayon")]
         {
             use rayon::prelude::*;
-            planes.par_iter_mut().enumerate().for_each(veil);
+            received
+                .par_chunks_mut(per_group)
+                .zip(spectra.par_iter_mut())
+                .enumerate()
+                .for_each(group);
         }
         #[cfg(not(feature = "rayon"))]
-        planes.iter_mut().enumerate().for_each(veil);
-        veils.clear();
-        veils
-            .extend((0..grid.nx * grid.ny).map(|k| std::array::from_fn(|p| planes[p].received[k])));
+        received
+            .chunks_mut(per_group)
+            .zip(spectra.iter_mut())
+            .enumerate()
+            .for_each(group);
+        // The flux is spent: its grid takes the veil.
+        let veils = &mut bands[0];
+        for (k, v) in veils.iter_mut().enumerate() {
+            *v = std::array::from_fn(|p| received[p][k]);
+        }
 
         let mut s_plane = scotopic;
         let keep = (1.0 - scattered) as f32;
@@ -801,23 +825,25 @@ impl Ffts {
         slot.as_ref().expect("filled above")
     }
 
-    /// 2-D forward FFT of the real `fw × fh` array `data` (only its first `rows` rows may
-    /// be non-zero; its rows are used as scratch) into `cols`, column-major over the half
-    /// spectrum (`fw/2 + 1` columns of `fh`).
-    fn forward(&self, data: &mut [f64], rows: usize, cols: &mut Vec<Complex<f64>>) {
+    /// 2-D forward FFT of a real `fw × fh` array whose first `rows` rows `row(y, out)`
+    /// writes (whole; the others are zero) into `cols`, column-major over the half
+    /// spectrum (`fw/2 + 1` columns of `fh`). One row is held at a time, not the array.
+    fn forward(&self, rows: usize, row: impl Fn(usize, &mut [f64]), cols: &mut Vec<Complex<f64>>) {
         let (fw, fh) = (self.fw, self.fh);
         let zero = Complex::new(0.0, 0.0);
         cols.clear();
         cols.resize((fw / 2 + 1) * fh, zero);
+        let mut row_in = self.row_forward.make_input_vec();
         let mut row_out = self.row_forward.make_output_vec();
         let mut scratch = self.row_forward.make_scratch_vec();
         for y in 0..rows {
-            let row = &mut data[y * fw..(y + 1) * fw];
-            if row.iter().all(|v| *v == 0.0) {
+            // Written whole for every row: the transform uses it as scratch.
+            row(y, &mut row_in);
+            if row_in.iter().all(|v| *v == 0.0) {
                 continue;
             }
             self.row_forward
-                .process_with_scratch(row, &mut row_out, &mut scratch)
+                .process_with_scratch(&mut row_in, &mut row_out, &mut scratch)
                 .expect("FFT buffers sized by their plan");
             for (x, v) in row_out.iter().enumerate() {
                 cols[x * fh + y] = *v;
@@ -828,14 +854,6 @@ impl Ffts {
             self.col_forward.process_with_scratch(col, &mut scratch);
         }
     }
-}
-
-/// One plane's FFT buffers: the padded grid, its half spectrum, the veil on the grid.
-#[derive(Clone, Default)]
-struct PlaneFft {
-    padded: Vec<f64>,
-    cols: Vec<Complex<f64>>,
-    received: Vec<f64>,
 }
 
 impl Grid {
@@ -1128,38 +1146,35 @@ impl Grid {
             }
         }
         let mut spectrum = Vec::new();
-        ffts.forward(&mut sharpened, fh, &mut spectrum);
+        ffts.forward(
+            fh,
+            |y, row| row.copy_from_slice(&sharpened[y * fw..(y + 1) * fw]),
+            &mut spectrum,
+        );
         Spectrum(spectrum)
     }
 
     /// Linear convolution of plane `plane` of the grid's flux (lux) with the kernel: the
-    /// veil (cd/m²), into `buffers.received`.
+    /// veil (cd/m²), into `received`.
     fn convolve(
         &self,
         flux: &[Cell],
         plane: usize,
         kernel: &Spectrum,
         ffts: &Ffts,
-        buffers: &mut PlaneFft,
+        cols: &mut Vec<Complex<f64>>,
+        received: &mut Vec<f64>,
     ) {
         let (fw, fh, nx, ny) = (self.fft_w, self.fft_h, self.nx, self.ny);
-        let PlaneFft {
-            padded,
-            cols,
-            received,
-        } = buffers;
-        // The grid's rows are written whole; the rows past them are not read (the forward
-        // transform takes only the first `ny`), so whatever a call before left there
-        // stays.
-        padded.resize(fw * fh, 0.0);
-        for y in 0..ny {
-            let (row, pad) = padded[y * fw..(y + 1) * fw].split_at_mut(nx);
+        // The grid's rows, zero-padded.
+        let padded_row = |y: usize, row: &mut [f64]| {
+            let (row, pad) = row.split_at_mut(nx);
             for (p, c) in row.iter_mut().zip(&flux[y * nx..(y + 1) * nx]) {
                 *p = c[plane];
             }
             pad.fill(0.0);
-        }
-        ffts.forward(padded, ny, cols);
+        };
+        ffts.forward(ny, padded_row, cols);
         let scale = 1.0 / (fw * fh) as f64;
         for (c, k) in cols.iter_mut().zip(&kernel.0) {
             *c *= k * scale;
