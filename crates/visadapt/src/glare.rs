@@ -449,7 +449,7 @@ impl Workspace {
         let per_group = PLANES.div_ceil(threads);
         spectra.truncate(PLANES.div_ceil(per_group));
         spectra.resize_with(PLANES.div_ceil(per_group), Vec::new);
-        let group = |(g, (outs, cols)): (usize, (&mut [Vec<f64>], &mut Vec<Complex<f64>>))| {
+        let group = |(g, (outs, cols)): (usize, PlaneGroup)| {
             for (i, out) in outs.iter_mut().enumerate() {
                 grid.convolve(flux, g * per_group + i, kernel, ffts, cols, out);
             }
@@ -499,6 +499,9 @@ impl Workspace {
         })
     }
 }
+
+/// A group of planes' veils on the grid, and the spectrum buffer they are convolved in.
+type PlaneGroup<'a> = (&'a mut [Vec<f64>], &'a mut Vec<Complex<f64>>);
 
 /// The scotopic plane estimated from the `x`, `y`, `z` planes, into `out` (its memory
 /// reused).
