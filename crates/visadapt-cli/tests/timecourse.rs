@@ -569,7 +569,7 @@ fn video_pipeline_writes_the_same_bytes_as_one_frame_after_another() {
     visadapt()
         .arg("video")
         .arg(dir.path().join("s%d.exr"))
-        // The library's PNG files are at `fast` (video's default is `rle`).
+        // The library's PNG files are at `fast` (video's default is `fdeflate`).
         .args([
             "--fps",
             "2",

@@ -238,18 +238,20 @@ pub struct Threads {
 }
 
 impl Default for Threads {
-    /// One decoder and one encoder per two cores the system offers, from one to four
-    /// each. On two cores that is one each: the operator's passes run on both cores and
-    /// the other stages fill the gaps, and two of each measured the same CPU time and
-    /// frame rate there for 35–60 % more memory (see the README's "Performance: Video").
-    /// Beyond two cores a frame's serial parts (a PNG's deflate, an EXR's channel
-    /// conversion) would bound the rate with one thread each.
+    /// One decoder per two cores the system offers and one encoder per core, from one
+    /// to four each: on two cores, one decoder and two encoders. The operator's passes
+    /// run on every core and the other stages fill the gaps. A PNG frame's compressor
+    /// ([`PngCompression::Fdeflate`], the default) runs on one thread, so with one
+    /// encoder the frame rate was bound by encoding; two encoders took the whole process
+    /// on 24 1080p frames from 0.82–0.98 s to 0.71–0.83 s (`.hdr`) and from 1.20–1.36 s
+    /// to 0.97–1.15 s (`.exr`), for about 32 MiB more memory (see the README's
+    /// "Performance: Video"). More decoders pay only beyond two cores, where one
+    /// frame's serial parts (an EXR's channel conversion) would bound the rate.
     fn default() -> Self {
         let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        let each = (cores / 2).clamp(1, 4);
         Threads {
-            decoders: each,
-            encoders: each,
+            decoders: (cores / 2).clamp(1, 4),
+            encoders: cores.clamp(1, 4),
         }
     }
 }
@@ -655,22 +657,18 @@ pub struct FileSink {
 }
 
 impl FileSink {
-    /// Frame `k` to `paths[k]`, in `format`; PNG frames at [`PngCompression::Rle`], the
-    /// video default: the whole `visadapt video` process on the 24 1080p frames of the
-    /// office sequence, interleaved with the same build at `Fastest` (4 pairs each, load
-    /// about 5 on two cores), took the same CPU time (Radiance frames 0.79 against
-    /// 0.82 s, OpenEXR 1.32 against 1.33 s) for files 44 % and 42 % smaller (7.29 against
-    /// 13.10 MB, 14.12 against 24.26 MB; `Fast`: 11.99 and 22.02 MB). Smaller files also
-    /// take less time to write and sync.
+    /// Frame `k` to `paths[k]`, in `format`; PNG frames at [`PngCompression::Fdeflate`],
+    /// the video default: the least CPU time per frame of the levels on textured and
+    /// photographic frames (see there), for files about the size of `Rle`'s.
     pub fn new(paths: Vec<PathBuf>, format: OutputFormat) -> Self {
         FileSink {
             paths,
             format,
-            png: PngCompression::Rle,
+            png: PngCompression::Fdeflate,
         }
     }
 
-    /// PNG frames at `png` compression ([`PngCompression::Rle`] unless set).
+    /// PNG frames at `png` compression ([`PngCompression::Fdeflate`] unless set).
     #[must_use]
     pub fn with_png_compression(mut self, png: PngCompression) -> Self {
         self.png = png;

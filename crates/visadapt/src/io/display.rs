@@ -74,7 +74,7 @@ fn par_pixels(out: &mut [u8], bytes_per_pixel: usize, f: impl Fn(usize, &mut [u8
     }
 }
 
-/// How hard a PNG is compressed. Both are lossless (the decoded samples are the same);
+/// How hard a PNG is compressed. All are lossless (the decoded samples are the same);
 /// they differ in encoding time and file size only.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PngCompression {
@@ -92,14 +92,28 @@ pub enum PngCompression {
     Fastest,
     /// The `Up` filter, then zlib-rs's run-length strategy (zlib's `Z_RLE`: matches at
     /// distance 1 only, dynamic Huffman codes per block; level 1 otherwise uses static
-    /// codes), in the same row bands: about the CPU time of [`PngCompression::Fast`],
-    /// files 36-40 % smaller. The default of `video`'s PNG frames
-    /// ([`FileSink`](crate::video::FileSink)). Measured on 24 mapped 1080p frames of the
+    /// codes), in the same row bands: about the CPU time of [`PngCompression::Fast`] on
+    /// smooth frames, files 36-40 % smaller (the default of `video`'s PNG frames before
+    /// [`PngCompression::Fdeflate`]; twice `Fast`'s CPU time on textured and
+    /// photographic ones, see there). Measured on 24 mapped 1080p frames of the
     /// office video (encoding alone, CPU time per frame, load 3-5 on two cores; the
     /// Radiance sequence, then the OpenEXR one): `Rle` 11-14 ms and 18.5-21 ms, 7.29 MB
     /// and 14.12 MB; `Fast` 11.4-14 ms and 18-18.5 ms, 11.98 MB and 22.02 MB; `Fastest`
     /// 10-12 ms and 13.5-17 ms, 13.09 MB and 24.26 MB.
     Rle,
+    /// The adaptive filter, as [`PngCompression::Fast`] (in parallel row bands), then
+    /// fdeflate's compressor on the calling thread (one block of fixed Huffman codes made
+    /// for filtered PNG rows, with runs of zeros): `png`'s own `Compression::Fast`, the
+    /// same file byte for byte. The least CPU time of the four on textured and
+    /// photographic frames, for files about the size of [`PngCompression::Rle`]'s; the
+    /// default of `video`'s PNG frames ([`FileSink`](crate::video::FileSink)). Encoding
+    /// alone, one thread, CPU time (files): the `video` bench's 1080p frame 31 ms
+    /// (2.39 MB) against `Rle` 72 ms (2.85 MB) and `Fast` 42 ms (2.33 MB); the mapped
+    /// `Tree.exr` (928 × 906) 13.6 ms (1.35 MB) against 34 ms (1.42 MB) and 28 ms
+    /// (1.93 MB); `office-fisheye.hdr` (786², smooth, black corners) 7.6 ms (536 kB)
+    /// against 11 ms (503 kB) and 7.0 ms (478 kB). Its compressor does not split into
+    /// bands, so with idle cores `Fast` can finish sooner in wall time.
+    Fdeflate,
 }
 
 impl PngCompression {
@@ -109,6 +123,7 @@ impl PngCompression {
         match self {
             PngCompression::Fast => png::Compression::Fast,
             PngCompression::Fastest | PngCompression::Rle => png::Compression::Fastest,
+            PngCompression::Fdeflate => png::Compression::Fast,
         }
     }
 }
@@ -273,6 +288,7 @@ mod tests {
                 PngCompression::Fast,
                 PngCompression::Fastest,
                 PngCompression::Rle,
+                PngCompression::Fdeflate,
             ] {
                 let mut file = Vec::new();
                 write_png_with(&image, bits, compression, &mut file).unwrap();
@@ -310,24 +326,27 @@ mod tests {
         assert!(first != file(&a, 8, PngCompression::Fastest));
     }
 
-    /// On a smooth picture (a mapped photograph's large areas) the run-length strategy's
-    /// dynamic codes beat level 1's static ones after the same `Up` filter: smaller files,
-    /// the same samples.
-    #[test]
-    fn rle_files_are_smaller_on_smooth_pictures() {
-        let (w, h) = (640, 360);
+    /// A smooth picture (a mapped photograph's large areas): slow waves, no noise.
+    fn smooth_picture(w: usize, h: usize) -> DisplayImage {
         let wave = |i: usize, k: f32| {
             let (x, y) = ((i % w) as f32 / w as f32, (i / w) as f32 / h as f32);
             0.5 + 0.4 * (3.0 * x + 2.0 * y + k).sin() * (1.0 - 0.5 * y)
         };
-        let image = DisplayImage {
+        DisplayImage {
             width: w,
             height: h,
             r: (0..w * h).map(|i| wave(i, 0.0)).collect(),
             g: (0..w * h).map(|i| wave(i, 1.0)).collect(),
             b: (0..w * h).map(|i| wave(i, 2.0)).collect(),
             display_max_cd_m2: 100.0,
-        };
+        }
+    }
+
+    /// On a smooth picture the run-length strategy's dynamic codes beat level 1's static
+    /// ones after the same `Up` filter: smaller files, the same samples.
+    #[test]
+    fn rle_files_are_smaller_on_smooth_pictures() {
+        let image = smooth_picture(640, 360);
         let size = |compression| {
             let mut f = Vec::new();
             write_png_with(&image, 8, compression, &mut f).unwrap();
@@ -336,6 +355,54 @@ mod tests {
         };
         let (rle, fastest) = (size(PngCompression::Rle), size(PngCompression::Fastest));
         assert!(rle * 10 < fastest * 8, "{rle} against {fastest}");
+    }
+
+    /// `Fdeflate` writes `png`'s own file at `Compression::Fast`, byte for byte (the same
+    /// adaptive filter, fdeflate called row by row, the same stored fallback), at both
+    /// depths, on one row, on one wave and on several (the 700-row images: 3 waves of
+    /// 336 rows at 8 bits, 5 of 168 at 16), compressed (smooth pictures) and stored (the
+    /// noisy ones, where fdeflate's codes would be larger than the rows).
+    #[test]
+    fn fdeflate_files_are_pngs_own_byte_for_byte() {
+        let (mut stored, mut compressed) = (0, 0);
+        for (w, h) in [(1, 1), (5, 3), (97, 61), (1031, 700)] {
+            for image in [picture(w, h), smooth_picture(w, h)] {
+                for bits in [8u8, 16] {
+                    let mut samples = Vec::new();
+                    if bits == 8 {
+                        srgb8_into(&image, &mut samples);
+                    } else {
+                        srgb16_into(&image, true, &mut samples);
+                    }
+                    let mut reference = Vec::new();
+                    let mut enc = png::Encoder::new(&mut reference, w as u32, h as u32);
+                    enc.set_color(png::ColorType::Rgb);
+                    enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+                    enc.set_depth(if bits == 8 {
+                        png::BitDepth::Eight
+                    } else {
+                        png::BitDepth::Sixteen
+                    });
+                    enc.set_compression(PngCompression::Fdeflate.png());
+                    let mut writer = enc.write_header().unwrap();
+                    writer.write_image_data(&samples).unwrap();
+                    writer.finish().unwrap();
+
+                    let mut file = Vec::new();
+                    write_png_with(&image, bits, PngCompression::Fdeflate, &mut file).unwrap();
+                    assert!(file == reference, "{w}x{h}, {bits} bits");
+                    // BTYPE of the first deflate block: 0 stored, 2 fdeflate's codes.
+                    match (idat(&file)[2] >> 1) & 3 {
+                        0 => stored += 1,
+                        _ => compressed += 1,
+                    }
+                }
+            }
+        }
+        assert!(
+            stored >= 2 && compressed >= 4,
+            "{stored} stored, {compressed} compressed"
+        );
     }
 
     /// The zlib stream of a PNG file: its IDAT chunks' data, concatenated.
@@ -386,6 +453,7 @@ mod tests {
                     PngCompression::Fast,
                     PngCompression::Fastest,
                     PngCompression::Rle,
+                    PngCompression::Fdeflate,
                 ] {
                     let what = format!("{w}x{h}, {bits} bits, {compression:?}");
                     let mut file = Vec::new();

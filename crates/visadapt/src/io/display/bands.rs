@@ -47,8 +47,10 @@ struct Settings {
 }
 
 impl Settings {
-    fn of(compression: PngCompression) -> Settings {
-        match compression {
+    /// The settings of a banded compression; `None` for [`PngCompression::Fdeflate`],
+    /// whose compressor is sequential.
+    fn of(compression: PngCompression) -> Option<Settings> {
+        Some(match compression {
             PngCompression::Fast => Settings {
                 filtering: Filtering::Adaptive,
                 level: 1,
@@ -64,7 +66,8 @@ impl Settings {
                 level: 1,
                 strategy: Strategy::Rle,
             },
-        }
+            PngCompression::Fdeflate => return None,
+        })
     }
 }
 
@@ -83,9 +86,10 @@ pub(super) fn zlib_pieces(
     bits: u8,
     compression: PngCompression,
 ) -> Result<Vec<Vec<u8>>, String> {
-    let settings = Settings::of(compression);
-    let bpp = if bits == 8 { 3 } else { 6 };
-    let row_bytes = image.width * bpp;
+    let Some(settings) = Settings::of(compression) else {
+        return Ok(vec![fdeflate_stream(image, bits)?]);
+    };
+    let row_bytes = image.width * bytes_per_pixel(bits);
     let rows_per_band = (BAND_BYTES / row_bytes.max(1)).clamp(1, image.height.max(1));
     let bands = image.height.div_ceil(rows_per_band).max(1);
     let isa = Isa::detect();
@@ -114,6 +118,106 @@ pub(super) fn zlib_pieces(
         last.extend_from_slice(&adler.to_be_bytes());
     }
     Ok(pieces)
+}
+
+/// The image data of `image` as one zlib stream compressed by fdeflate (one block of
+/// fixed Huffman codes made for filtered PNG rows, and runs of zeros), as `png`'s own
+/// encoder writes it at `Compression::Fast`, with its fallback: the rows stored
+/// unfiltered where that is smaller. The same bytes as `png`'s encoder (tested).
+///
+/// fdeflate's compressor is sequential; the sRGB encoding and the adaptive filter are
+/// not. The rows go in waves of [`WAVE_BANDS`] bands: while one wave is compressed, the
+/// next is encoded and filtered in parallel bands (`rayon::join`), into the other of two
+/// buffers.
+pub(super) fn fdeflate_stream(image: &DisplayImage, bits: u8) -> Result<Vec<u8>, String> {
+    let row_bytes = image.width * bytes_per_pixel(bits);
+    let stride = row_bytes + 1;
+    let len = stride * image.height;
+    let rows_per_band = (BAND_BYTES / row_bytes.max(1)).clamp(1, image.height.max(1));
+    let wave_rows = rows_per_band * WAVE_BANDS;
+    let wave = |k: usize| k * wave_rows..((k + 1) * wave_rows).min(image.height);
+    let waves = image.height.div_ceil(wave_rows);
+    let buffer_len = wave_rows.min(image.height) * stride;
+    let (mut ready, mut next) = (vec![0u8; buffer_len], vec![0u8; buffer_len]);
+    let failed = |e: std::io::Error| format!("fdeflate: {e}");
+    let out = std::io::Cursor::new(Vec::with_capacity(len / 4 + 64));
+    let mut compressor = fdeflate::Compressor::new(out).map_err(failed)?;
+    filter_wave(image, bits, wave(0), rows_per_band, &mut ready);
+    for k in 0..waves {
+        let filtered = &ready[..wave(k).len() * stride];
+        let compress = || {
+            filtered
+                .chunks_exact(stride)
+                .try_for_each(|row| compressor.write_data(row))
+        };
+        let filter_next = || filter_wave(image, bits, wave(k + 1), rows_per_band, &mut next);
+        #[cfg(feature = "rayon")]
+        let (compressed, ()) = rayon::join(compress, filter_next);
+        #[cfg(not(feature = "rayon"))]
+        let (compressed, ()) = (compress(), filter_next());
+        compressed.map_err(failed)?;
+        std::mem::swap(&mut ready, &mut next);
+    }
+    let stream = compressor.finish().map_err(failed)?.into_inner();
+    if stream.len() <= fdeflate::StoredOnlyCompressor::<()>::compressed_size(len) {
+        return Ok(stream);
+    }
+    // Larger than the rows themselves: stored, unfiltered (filter type 0), as `png` does.
+    let out = std::io::Cursor::new(Vec::with_capacity(len + len / 4096 + 64));
+    let mut stored = fdeflate::StoredOnlyCompressor::new(out).map_err(failed)?;
+    let mut row = vec![0u8; row_bytes];
+    for y in 0..image.height {
+        encode_row(image, bits, y, &mut row);
+        stored.write_data(&[0]).map_err(failed)?;
+        stored.write_data(&row).map_err(failed)?;
+    }
+    Ok(stored.finish().map_err(failed)?.into_inner())
+}
+
+/// Bands of rows per wave of [`fdeflate_stream`]: about 1 MiB of rows (six waves of a
+/// 1080p 8-bit frame), as many bands as keep several cores busy filtering while one
+/// compresses.
+const WAVE_BANDS: usize = 4;
+
+/// `rows` of `image` (empty past the last row) encoded and adaptively filtered into the
+/// start of `out`, in parallel bands of `rows_per_band`.
+fn filter_wave(
+    image: &DisplayImage,
+    bits: u8,
+    rows: std::ops::Range<usize>,
+    rows_per_band: usize,
+    out: &mut [u8],
+) {
+    let stride = image.width * bytes_per_pixel(bits) + 1;
+    let out = &mut out[..rows.len() * stride];
+    let isa = Isa::detect();
+    let band = |(k, out): (usize, &mut [u8])| {
+        let first = rows.start + k * rows_per_band;
+        let rows = first..first + out.len() / stride;
+        at_level!(isa, filter_band(image, bits, rows, out));
+    };
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        out.par_chunks_mut(rows_per_band * stride)
+            .enumerate()
+            .for_each(band);
+    }
+    #[cfg(not(feature = "rayon"))]
+    out.chunks_mut(rows_per_band * stride)
+        .enumerate()
+        .for_each(band);
+}
+
+/// The adaptively filtered `rows` of `image` into `out` (each its type byte, then its
+/// bytes).
+#[inline(always)]
+fn filter_band(image: &DisplayImage, bits: u8, rows: std::ops::Range<usize>, out: &mut [u8]) {
+    let stride = image.width * bytes_per_pixel(bits) + 1;
+    let mut filter = RowFilter::new(image, bits, Filtering::Adaptive, rows.start);
+    for (y, row) in rows.zip(out.chunks_exact_mut(stride)) {
+        row.copy_from_slice(filter.row(y));
+    }
 }
 
 thread_local! {
@@ -167,33 +271,16 @@ fn deflate_rows(
     last: bool,
     deflate: &mut Deflate,
 ) -> Result<Segment, String> {
-    let bpp = if bits == 8 { 3 } else { 6 };
-    let row_bytes = image.width * bpp;
-    let raw_len = (row_bytes + 1) * rows.len();
-    let mut prev = vec![0u8; row_bytes];
-    let mut cur = vec![0u8; row_bytes];
-    // The filter type byte, then the filtered row; a second one for the adaptive trials.
-    let mut best = vec![0u8; row_bytes + 1];
-    let mut trial = vec![0u8; row_bytes + 1];
-    if rows.start > 0 {
-        encode_row(image, bits, rows.start - 1, &mut prev);
-    }
+    let raw_len = (image.width * bytes_per_pixel(bits) + 1) * rows.len();
+    let mut filter = RowFilter::new(image, bits, settings.filtering, rows.start);
     // A quarter of the raw size to start with: grown as needed (level 1 output of a
     // mapped frame is 10-30 % of it), so little is zero-filled in advance.
     let mut out = Output::new(raw_len / 4 + 64, first);
     let mut adler = 1u32;
-    for y in rows.clone() {
-        encode_row(image, bits, y, &mut cur);
-        match settings.filtering {
-            Filtering::Up => {
-                best[0] = 2;
-                up(&prev, &cur, &mut best[1..]);
-            }
-            Filtering::Adaptive => adaptive(bpp, &prev, &cur, &mut best, &mut trial),
-        }
-        adler = zlib_rs::adler32::adler32(adler, &best);
-        out.deflate(deflate, &best, DeflateFlush::NoFlush)?;
-        std::mem::swap(&mut prev, &mut cur);
+    for y in rows {
+        let row = filter.row(y);
+        adler = zlib_rs::adler32::adler32(adler, row);
+        out.deflate(deflate, row, DeflateFlush::NoFlush)?;
     }
     let flush = if last {
         DeflateFlush::Finish
@@ -206,6 +293,68 @@ fn deflate_rows(
         adler,
         filtered_len: raw_len as u64,
     })
+}
+
+/// Bytes per pixel of interleaved RGB at `bits` (8 or 16) per channel.
+fn bytes_per_pixel(bits: u8) -> usize {
+    if bits == 8 { 3 } else { 6 }
+}
+
+/// The filtered rows of an image, one after another (PNG 1.2 §6): each row sRGB-encoded,
+/// then filtered against the row above it (the row above the first one asked for is
+/// encoded too, so that a band's rows are those of one sequential pass).
+struct RowFilter<'a> {
+    image: &'a DisplayImage,
+    bits: u8,
+    filtering: Filtering,
+    prev: Vec<u8>,
+    cur: Vec<u8>,
+    /// The filter type byte, then the filtered row; `trial` is the adaptive choice's
+    /// second one.
+    best: Vec<u8>,
+    trial: Vec<u8>,
+}
+
+impl<'a> RowFilter<'a> {
+    /// Ready for row `first` (and the rows after it, in order).
+    #[inline(always)]
+    fn new(image: &'a DisplayImage, bits: u8, filtering: Filtering, first: usize) -> Self {
+        let row_bytes = image.width * bytes_per_pixel(bits);
+        let mut prev = vec![0u8; row_bytes];
+        if first > 0 {
+            encode_row(image, bits, first - 1, &mut prev);
+        }
+        RowFilter {
+            image,
+            bits,
+            filtering,
+            prev,
+            cur: vec![0u8; row_bytes],
+            best: vec![0u8; row_bytes + 1],
+            trial: vec![0u8; row_bytes + 1],
+        }
+    }
+
+    /// Row `y` (the row after the previous call's), filtered: its type byte first.
+    #[inline(always)]
+    fn row(&mut self, y: usize) -> &[u8] {
+        encode_row(self.image, self.bits, y, &mut self.cur);
+        match self.filtering {
+            Filtering::Up => {
+                self.best[0] = 2;
+                up(&self.prev, &self.cur, &mut self.best[1..]);
+            }
+            Filtering::Adaptive => adaptive(
+                bytes_per_pixel(self.bits),
+                &self.prev,
+                &self.cur,
+                &mut self.best,
+                &mut self.trial,
+            ),
+        }
+        std::mem::swap(&mut self.prev, &mut self.cur);
+        &self.best
+    }
 }
 
 /// Row `y` of `image` as sRGB codes, interleaved RGB (`bits` 8 or 16, big-endian).
