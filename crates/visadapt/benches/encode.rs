@@ -3,8 +3,9 @@
 //! second: one element a pixel). The ids are fixed so that figures can be followed over
 //! time:
 //!
-//! * `encode/png/1920x1080/{fast,fastest,rle}`: [`write_png_with`] at 8 bits per channel,
-//!   into a reused buffer (sRGB encoding, filtering and deflate in parallel row bands);
+//! * `encode/png/1920x1080/{fast,fastest,rle,fdeflate}`: [`write_png_with`] at 8 bits per
+//!   channel, into a reused buffer (sRGB encoding, filtering and deflate in parallel row
+//!   bands; for `fdeflate`, the compressor on one thread while the next rows are filtered);
 //! * `encode/png16/1920x1080/fast`: the same at 16 bits per channel (`visadapt map
 //!   --bits 16`);
 //! * `encode/srgb8/1920x1080`: the sRGB transfer alone ([`to_srgb8`], interleaved 8-bit
@@ -66,6 +67,7 @@ fn bench(c: &mut Criterion) {
         ("fast", PngCompression::Fast),
         ("fastest", PngCompression::Fastest),
         ("rle", PngCompression::Rle),
+        ("fdeflate", PngCompression::Fdeflate),
     ] {
         bytes.clear();
         write_png_with(&image, 8, compression, &mut bytes).unwrap();

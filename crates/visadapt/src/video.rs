@@ -243,8 +243,8 @@ impl Default for Threads {
     /// run on every core and the other stages fill the gaps. A PNG frame's compressor
     /// ([`PngCompression::Fdeflate`], the default) runs on one thread, so with one
     /// encoder the frame rate was bound by encoding; two encoders took the whole process
-    /// on 24 1080p frames from 0.82–0.98 s to 0.71–0.83 s (`.hdr`) and from 1.20–1.36 s
-    /// to 0.97–1.15 s (`.exr`), for about 32 MiB more memory (see the README's
+    /// on 24 1080p frames from 0.82–0.98 s to 0.71–0.83 s (`.hdr`) and from 1.13–1.58 s
+    /// to 0.97–1.24 s (`.exr`), for about 31 MiB more memory (see the README's
     /// "Performance: Video"). More decoders pay only beyond two cores, where one
     /// frame's serial parts (an EXR's channel conversion) would bound the rate.
     fn default() -> Self {

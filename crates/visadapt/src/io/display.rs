@@ -102,17 +102,18 @@ pub enum PngCompression {
     /// 10-12 ms and 13.5-17 ms, 13.09 MB and 24.26 MB.
     Rle,
     /// The adaptive filter, as [`PngCompression::Fast`] (in parallel row bands), then
-    /// fdeflate's compressor on the calling thread (one block of fixed Huffman codes made
-    /// for filtered PNG rows, with runs of zeros): `png`'s own `Compression::Fast`, the
-    /// same file byte for byte. The least CPU time of the four on textured and
-    /// photographic frames, for files about the size of [`PngCompression::Rle`]'s; the
+    /// fdeflate's compressor (one block of fixed Huffman codes made for filtered PNG
+    /// rows, with runs of zeros) on one thread while the next rows are filtered: `png`'s
+    /// own `Compression::Fast`, the same file byte for byte. The least CPU time of the
+    /// four on textured and photographic frames, for files about the size of
+    /// [`PngCompression::Rle`]'s there; on smooth ones `Rle`'s files are smaller (the
+    /// 1080p office video above: 7.3 MB against 11.6 MB from `png`'s own path). The
     /// default of `video`'s PNG frames ([`FileSink`](crate::video::FileSink)). Encoding
-    /// alone, one thread, CPU time (files): the `video` bench's 1080p frame 31 ms
-    /// (2.39 MB) against `Rle` 72 ms (2.85 MB) and `Fast` 42 ms (2.33 MB); the mapped
-    /// `Tree.exr` (928 × 906) 13.6 ms (1.35 MB) against 34 ms (1.42 MB) and 28 ms
-    /// (1.93 MB); `office-fisheye.hdr` (786², smooth, black corners) 7.6 ms (536 kB)
-    /// against 11 ms (503 kB) and 7.0 ms (478 kB). Its compressor does not split into
-    /// bands, so with idle cores `Fast` can finish sooner in wall time.
+    /// alone, the shortest of five runs on one thread at load 1.5 (file sizes): the
+    /// `video` bench's 1080p frame 27 ms (2.39 MB) against `Rle` 68 ms (2.85 MB) and
+    /// `Fast` 39 ms (2.33 MB); the mapped `Tree.exr` (928 × 906) 10 ms (1.35 MB) against
+    /// 28 ms (1.42 MB) and 23 ms (1.93 MB); `office-fisheye.hdr` (786², smooth, black
+    /// corners) 8.5 ms (536 kB) against 16 ms (503 kB) and 9.1 ms (478 kB).
     Fdeflate,
 }
 
@@ -357,6 +358,44 @@ mod tests {
         assert!(rle * 10 < fastest * 8, "{rle} against {fastest}");
     }
 
+    /// The interleaved sRGB samples of `image` a PNG of `bits` per channel holds.
+    fn samples(image: &DisplayImage, bits: u8) -> Vec<u8> {
+        let mut samples = Vec::new();
+        if bits == 8 {
+            srgb8_into(image, &mut samples);
+        } else {
+            srgb16_into(image, true, &mut samples);
+        }
+        samples
+    }
+
+    /// The file `png`'s own encoder writes for `samples` (RGB, `bits` per channel), with
+    /// the `sRGB` chunk if `srgb`, at `compression`.
+    fn pngs_own(
+        samples: &[u8],
+        (w, h): (usize, usize),
+        bits: u8,
+        srgb: bool,
+        compression: png::Compression,
+    ) -> Vec<u8> {
+        let mut file = Vec::new();
+        let mut enc = png::Encoder::new(&mut file, w as u32, h as u32);
+        enc.set_color(png::ColorType::Rgb);
+        if srgb {
+            enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        }
+        enc.set_depth(if bits == 8 {
+            png::BitDepth::Eight
+        } else {
+            png::BitDepth::Sixteen
+        });
+        enc.set_compression(compression);
+        let mut writer = enc.write_header().unwrap();
+        writer.write_image_data(samples).unwrap();
+        writer.finish().unwrap();
+        file
+    }
+
     /// `Fdeflate` writes `png`'s own file at `Compression::Fast`, byte for byte (the same
     /// adaptive filter, fdeflate called row by row, the same stored fallback), at both
     /// depths, on one row, on one wave and on several (the 700-row images: 3 waves of
@@ -368,26 +407,8 @@ mod tests {
         for (w, h) in [(1, 1), (5, 3), (97, 61), (1031, 700)] {
             for image in [picture(w, h), smooth_picture(w, h)] {
                 for bits in [8u8, 16] {
-                    let mut samples = Vec::new();
-                    if bits == 8 {
-                        srgb8_into(&image, &mut samples);
-                    } else {
-                        srgb16_into(&image, true, &mut samples);
-                    }
-                    let mut reference = Vec::new();
-                    let mut enc = png::Encoder::new(&mut reference, w as u32, h as u32);
-                    enc.set_color(png::ColorType::Rgb);
-                    enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-                    enc.set_depth(if bits == 8 {
-                        png::BitDepth::Eight
-                    } else {
-                        png::BitDepth::Sixteen
-                    });
-                    enc.set_compression(PngCompression::Fdeflate.png());
-                    let mut writer = enc.write_header().unwrap();
-                    writer.write_image_data(&samples).unwrap();
-                    writer.finish().unwrap();
-
+                    let own = PngCompression::Fdeflate.png();
+                    let reference = pngs_own(&samples(&image, bits), (w, h), bits, true, own);
                     let mut file = Vec::new();
                     write_png_with(&image, bits, PngCompression::Fdeflate, &mut file).unwrap();
                     assert!(file == reference, "{w}x{h}, {bits} bits");
@@ -442,12 +463,7 @@ mod tests {
         for (w, h) in [(1, 1), (5, 3), (97, 61), (300, 1000), (1031, 257)] {
             let image = picture(w, h);
             for bits in [8u8, 16] {
-                let mut expected = Vec::new();
-                if bits == 8 {
-                    srgb8_into(&image, &mut expected);
-                } else {
-                    srgb16_into(&image, true, &mut expected);
-                }
+                let expected = samples(&image, bits);
                 let filtered_len = (w * usize::from(bits / 8) * 3 + 1) * h;
                 for compression in [
                     PngCompression::Fast,
@@ -461,18 +477,7 @@ mod tests {
                     let (_, samples) = decoded(&file);
                     assert!(samples == expected, "samples of {what}");
 
-                    let mut reference = Vec::new();
-                    let mut enc = png::Encoder::new(&mut reference, w as u32, h as u32);
-                    enc.set_color(png::ColorType::Rgb);
-                    enc.set_depth(if bits == 8 {
-                        png::BitDepth::Eight
-                    } else {
-                        png::BitDepth::Sixteen
-                    });
-                    enc.set_compression(compression.png());
-                    let mut writer = enc.write_header().unwrap();
-                    writer.write_image_data(&expected).unwrap();
-                    writer.finish().unwrap();
+                    let reference = pngs_own(&expected, (w, h), bits, false, compression.png());
                     let ours = inflated(&idat(&file), filtered_len);
                     let theirs = inflated(&idat(&reference), filtered_len);
                     // Unless `png` stored the rows unfiltered (its fallback where fdeflate's
