@@ -10,6 +10,10 @@
 //! followed by the Adler-32 of all filtered bytes (the bands' sums combined), are one
 //! valid zlib stream; each band's segment is written as its own IDAT chunk (PNG 1.2 §4.1.3
 //! allows several, their data concatenated), so nothing is copied to join them.
+//!
+//! [`PngCompression::Fdeflate`]'s compressor cannot be split so: its stream is one block
+//! from one compressor. There the bands are only encoded and filtered in parallel, a wave
+//! of them at a time, while the previous wave is compressed ([`fdeflate_stream`]).
 
 use super::PngCompression;
 use crate::DisplayImage;
