@@ -160,15 +160,13 @@ pub fn write_png_with(
     enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
     enc.set_depth(depth);
     let mut writer = enc.write_header().map_err(png_error)?;
-    let pieces = bands::zlib_pieces(image, bits, compression).map_err(Error::Unsupported)?;
-    for piece in &pieces {
-        // A chunk holds at most 2³¹ − 1 bytes (PNG 1.2 §3.2); a band is far smaller.
-        for chunk in piece.chunks(i32::MAX as usize) {
-            writer
-                .write_chunk(png::chunk::IDAT, chunk)
-                .map_err(png_error)?;
-        }
-    }
+    bands::write_zlib(image, bits, compression, |piece| {
+        // A chunk holds at most 2³¹ − 1 bytes (PNG 1.2 §3.2).
+        piece
+            .chunks(i32::MAX as usize)
+            .try_for_each(|chunk| writer.write_chunk(png::chunk::IDAT, chunk))
+            .map_err(png_error)
+    })?;
     writer.finish().map_err(png_error)
 }
 

@@ -83,16 +83,24 @@ struct Segment {
     filtered_len: u64,
 }
 
-/// The image data of `image` as a zlib stream in pieces, each to be written as one IDAT
-/// chunk in order: `bits` 8 or 16 (checked by the caller), RGB.
-pub(super) fn zlib_pieces(
+/// The image data of `image` as a zlib stream, handed to `piece` in pieces, each to be
+/// written as one IDAT chunk in order: `bits` 8 or 16 (checked by the caller), RGB.
+pub(super) fn write_zlib(
     image: &DisplayImage,
     bits: u8,
     compression: PngCompression,
-) -> Result<Vec<Vec<u8>>, String> {
+    mut piece: impl FnMut(&[u8]) -> crate::Result<()>,
+) -> crate::Result<()> {
     let Some(settings) = Settings::of(compression) else {
-        return Ok(vec![fdeflate_stream(image, bits)?]);
+        return fdeflate_stream(image, bits, piece);
     };
+    let pieces = zlib_pieces(image, bits, settings).map_err(crate::Error::Unsupported)?;
+    pieces.iter().try_for_each(|p| piece(p))
+}
+
+/// The image data of `image` as a zlib stream in pieces, one per band, deflated with
+/// `settings`.
+fn zlib_pieces(image: &DisplayImage, bits: u8, settings: Settings) -> Result<Vec<Vec<u8>>, String> {
     let row_bytes = image.width * bytes_per_pixel(bits);
     let rows_per_band = (BAND_BYTES / row_bytes.max(1)).clamp(1, image.height.max(1));
     let bands = image.height.div_ceil(rows_per_band).max(1);
@@ -125,57 +133,122 @@ pub(super) fn zlib_pieces(
 }
 
 /// The image data of `image` as one zlib stream compressed by fdeflate (one block of
-/// fixed Huffman codes made for filtered PNG rows, and runs of zeros), as `png`'s own
-/// encoder writes it at `Compression::Fast`, with its fallback: the rows stored
-/// unfiltered where that is smaller. The same bytes as `png`'s encoder (tested).
+/// fixed Huffman codes made for filtered PNG rows, and runs of zeros), handed to `then`,
+/// as `png`'s own encoder writes it at `Compression::Fast`, with its fallback: the rows
+/// stored unfiltered where that is smaller. The same bytes as `png`'s encoder (tested).
 ///
 /// fdeflate's compressor is sequential; the sRGB encoding and the adaptive filter are
 /// not. The rows go in waves of [`WAVE_BANDS`] bands: while one wave is compressed, the
 /// next is encoded and filtered in parallel bands (`rayon::join`), into the other of two
-/// buffers.
-pub(super) fn fdeflate_stream(image: &DisplayImage, bits: u8) -> Result<Vec<u8>, String> {
-    let row_bytes = image.width * bytes_per_pixel(bits);
-    let stride = row_bytes + 1;
-    let len = stride * image.height;
-    let rows_per_band = (BAND_BYTES / row_bytes.max(1)).clamp(1, image.height.max(1));
-    let wave_rows = rows_per_band * WAVE_BANDS;
-    let wave = |k: usize| k * wave_rows..((k + 1) * wave_rows).min(image.height);
-    let waves = image.height.div_ceil(wave_rows);
-    let buffer_len = wave_rows.min(image.height) * stride;
-    let (mut ready, mut next) = (vec![0u8; buffer_len], vec![0u8; buffer_len]);
-    let failed = |e: std::io::Error| format!("fdeflate: {e}");
-    let out = std::io::Cursor::new(Vec::with_capacity(len / 4 + 64));
-    let mut compressor = fdeflate::Compressor::new(out).map_err(failed)?;
-    filter_wave(image, bits, wave(0), rows_per_band, &mut ready);
-    for k in 0..waves {
-        let filtered = &ready[..wave(k).len() * stride];
-        let compress = || {
-            filtered
-                .chunks_exact(stride)
-                .try_for_each(|row| compressor.write_data(row))
-        };
-        let filter_next = || filter_wave(image, bits, wave(k + 1), rows_per_band, &mut next);
-        #[cfg(feature = "rayon")]
-        let (compressed, ()) = rayon::join(compress, filter_next);
-        #[cfg(not(feature = "rayon"))]
-        let (compressed, ()) = (compress(), filter_next());
-        compressed.map_err(failed)?;
-        std::mem::swap(&mut ready, &mut next);
+/// buffers. The buffers and the stream are the calling thread's [`Scratch`], kept for
+/// its next image.
+pub(super) fn fdeflate_stream<R>(
+    image: &DisplayImage,
+    bits: u8,
+    then: impl FnOnce(&[u8]) -> crate::Result<R>,
+) -> crate::Result<R> {
+    let mut scratch = Scratch::take();
+    let result = scratch
+        .fdeflate(image, bits)
+        .map_err(crate::Error::Unsupported)
+        .and_then(then);
+    scratch.keep();
+    result
+}
+
+/// The buffers of [`fdeflate_stream`], kept by each thread that writes PNGs, so that
+/// frame after frame reuses memory already paged in: allocated afresh, they were about
+/// 400 page faults (memory cleared by the kernel, then by `calloc`) of every 1080p frame
+/// in `video`. Kept only up to [`SCRATCH_KEPT_MAX_BYTES`].
+#[derive(Default)]
+struct Scratch {
+    /// The filtered rows of the wave being compressed and of the next one.
+    waves: [Vec<u8>; 2],
+    /// The zlib stream.
+    stream: Vec<u8>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::Cell<Scratch> = std::cell::Cell::new(Scratch::default());
+}
+
+/// The most a thread keeps in its [`Scratch`] between images: a 4K frame's (two waves
+/// of about 1 MiB and a stream of at most the 24 MiB of its 8-bit rows). Our choice, so
+/// that huge images do not leave their buffers behind in every thread.
+const SCRATCH_KEPT_MAX_BYTES: usize = 32 << 20;
+
+impl Scratch {
+    fn take() -> Scratch {
+        SCRATCH.take()
     }
-    let stream = compressor.finish().map_err(failed)?.into_inner();
-    if stream.len() <= fdeflate::StoredOnlyCompressor::<()>::compressed_size(len) {
-        return Ok(stream);
+
+    /// Back to the thread for its next image, if small enough.
+    fn keep(self) {
+        let bytes = self.waves.iter().map(Vec::capacity).sum::<usize>() + self.stream.capacity();
+        if bytes <= SCRATCH_KEPT_MAX_BYTES {
+            SCRATCH.set(self);
+        }
     }
-    // Larger than the rows themselves: stored, unfiltered (filter type 0), as `png` does.
-    let out = std::io::Cursor::new(Vec::with_capacity(len + len / 4096 + 64));
-    let mut stored = fdeflate::StoredOnlyCompressor::new(out).map_err(failed)?;
-    let mut row = vec![0u8; row_bytes];
-    for y in 0..image.height {
-        encode_row(image, bits, y, &mut row);
-        stored.write_data(&[0]).map_err(failed)?;
-        stored.write_data(&row).map_err(failed)?;
+
+    /// The zlib stream of `image` (see [`fdeflate_stream`]).
+    fn fdeflate(&mut self, image: &DisplayImage, bits: u8) -> Result<&[u8], String> {
+        let row_bytes = image.width * bytes_per_pixel(bits);
+        let stride = row_bytes + 1;
+        let len = stride * image.height;
+        let rows_per_band = (BAND_BYTES / row_bytes.max(1)).clamp(1, image.height.max(1));
+        let wave_rows = rows_per_band * WAVE_BANDS;
+        let wave = |k: usize| k * wave_rows..((k + 1) * wave_rows).min(image.height);
+        let waves = image.height.div_ceil(wave_rows);
+        let buffer_len = wave_rows.min(image.height) * stride;
+        let [ready, next] = &mut self.waves;
+        // Every byte read is written by `filter_wave` first: no need to clear.
+        for buffer in [&mut *ready, &mut *next] {
+            buffer.resize(buffer_len, 0);
+        }
+        let failed = |e: std::io::Error| format!("fdeflate: {e}");
+        let mut stream = std::mem::take(&mut self.stream);
+        stream.clear();
+        stream.reserve(len / 4 + 64);
+        let mut compressor =
+            fdeflate::Compressor::new(std::io::Cursor::new(stream)).map_err(failed)?;
+        filter_wave(image, bits, wave(0), rows_per_band, ready);
+        for k in 0..waves {
+            let filtered = &ready[..wave(k).len() * stride];
+            let compress = || {
+                filtered
+                    .chunks_exact(stride)
+                    .try_for_each(|row| compressor.write_data(row))
+            };
+            let filter_next = || filter_wave(image, bits, wave(k + 1), rows_per_band, next);
+            #[cfg(feature = "rayon")]
+            let (compressed, ()) = rayon::join(compress, filter_next);
+            #[cfg(not(feature = "rayon"))]
+            let (compressed, ()) = (compress(), filter_next());
+            compressed.map_err(failed)?;
+            std::mem::swap(ready, next);
+        }
+        self.stream = compressor.finish().map_err(failed)?.into_inner();
+        if self.stream.len() <= fdeflate::StoredOnlyCompressor::<()>::compressed_size(len) {
+            return Ok(&self.stream);
+        }
+        // Larger than the rows themselves: stored, unfiltered (filter type 0), as `png`
+        // does.
+        let mut out = std::mem::take(&mut self.stream);
+        out.clear();
+        out.reserve(len + len / 4096 + 64);
+        let mut stored =
+            fdeflate::StoredOnlyCompressor::new(std::io::Cursor::new(out)).map_err(failed)?;
+        let row = &mut self.waves[0];
+        row.resize(row.len().max(row_bytes), 0);
+        let row = &mut row[..row_bytes];
+        for y in 0..image.height {
+            encode_row(image, bits, y, row);
+            stored.write_data(&[0]).map_err(failed)?;
+            stored.write_data(row).map_err(failed)?;
+        }
+        self.stream = stored.finish().map_err(failed)?.into_inner();
+        Ok(&self.stream)
     }
-    Ok(stored.finish().map_err(failed)?.into_inner())
 }
 
 /// Bands of rows per wave of [`fdeflate_stream`]: about 1 MiB of rows (six waves of a
