@@ -17,8 +17,9 @@
 //! kernel hands out such memory already zeroed, so zeroed allocations (`vec![0.0; n]`)
 //! are not cleared a second time. Smaller allocations, and every allocation off Linux,
 //! go to the system allocator unchanged. A freed mapping is kept for the next allocation
-//! of its size (a few of them, bounded: see `spares`), so that buffers allocated over and
-//! over do not fault in fresh pages each time. A mapping that fails is reported as an
+//! of its length (up to sixteen of them, and never more memory, live and kept, than was
+//! live at the peak: see `spares`), so that buffers allocated over and over do not fault
+//! in fresh pages each time. A mapping that fails is reported as an
 //! allocation failure, as the system allocator's would be; advice the kernel refuses
 //! (huge pages switched off) only loses the speed.
 //!
@@ -66,7 +67,7 @@ unsafe impl GlobalAlloc for HugePages {
     #[inline]
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         if own_mapping(&layout) {
-            spares::take(layout.size()).unwrap_or_else(|| map_huge(layout.size()))
+            own(layout.size()).0
         } else {
             // SAFETY: the caller's contract, passed on.
             unsafe { System.alloc(layout) }
@@ -76,14 +77,14 @@ unsafe impl GlobalAlloc for HugePages {
     #[inline]
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         if own_mapping(&layout) {
-            match spares::take(layout.size()) {
-                // SAFETY: a spare mapping of at least `layout.size()` bytes, now ours.
-                Some(p) => unsafe {
+            match own(layout.size()) {
+                // SAFETY: a reused mapping of at least `layout.size()` bytes, now ours.
+                (p, false) => unsafe {
                     p.write_bytes(0, layout.size());
                     p
                 },
-                // Fresh anonymous memory reads as zero.
-                None => map_huge(layout.size()),
+                // Fresh anonymous memory reads as zero (or null: the mapping failed).
+                (p, true) => p,
             }
         } else {
             // SAFETY: the caller's contract, passed on.
@@ -94,8 +95,10 @@ unsafe impl GlobalAlloc for HugePages {
     #[inline]
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         if own_mapping(&layout) {
-            if !spares::keep(ptr, layout.size()) {
-                unmap(ptr, layout.size());
+            let len = mapping_len(layout.size());
+            if !spares::keep(ptr, len) {
+                unmap(ptr, len);
+                spares::gone(len);
             }
         } else {
             // SAFETY: `ptr` came from `System` with this layout (same routing as alloc).
@@ -131,82 +134,171 @@ unsafe impl GlobalAlloc for HugePages {
 /// there instead of faulting in fresh ones, as the system allocator does by keeping
 /// freed blocks of up to 32 MiB in its heap.
 ///
-/// Bounded: at most [`SLOTS`](spares::SLOTS) mappings are kept, and an allocation that
-/// finds none of its length first unmaps all that are kept, so that the process never
-/// holds more memory (live and kept) than it held live at some earlier moment.
+/// Bounded: the mappings live and kept together never exceed the most that were live
+/// at one moment before (the *peak*), so keeping costs no memory the process did not
+/// already hold. An allocation that finds no kept mapping of its length is mapped fresh
+/// while that bound leaves room; otherwise it takes the head of the smallest larger kept
+/// mapping (its tail unmapped), or unmaps kept mappings, smallest first, until the new
+/// one fits under the bound. An allocation of a length none of the kept ones has (a
+/// preview's plane between full frames, an encoded file's buffer as it grows) therefore
+/// no longer unmaps every kept mapping, as it did before, so that the next full-size
+/// planes do not fault in fresh memory.
 mod spares {
     use std::sync::Mutex;
 
-    /// How many freed mappings are kept. Our choice: more than the planes of one image
-    /// (an HDR image's four, a display image's three).
-    pub(super) const SLOTS: usize = 8;
+    /// How many freed mappings are kept at most. Our choice: more than the buffers of
+    /// the frames `video` keeps in flight (decoded planes, display planes, encoded
+    /// files); the memory they hold is bounded by the peak rule, not by this count.
+    pub(super) const SLOTS: usize = 16;
 
-    /// A kept mapping: its start and the size it was allocated for (0: an empty slot).
+    /// A kept mapping: its start and its length (0: an empty slot).
     #[derive(Clone, Copy)]
     struct Spare(*mut u8, usize);
+
+    const EMPTY: Spare = Spare(std::ptr::null_mut(), 0);
 
     // SAFETY: a kept mapping belongs to no one until `take` hands it out; the pointer is
     // only moved between threads under the mutex, never dereferenced there.
     unsafe impl Send for Spare {}
 
-    static KEPT: Mutex<[Spare; SLOTS]> = Mutex::new([Spare(std::ptr::null_mut(), 0); SLOTS]);
+    /// The kept mappings and the bytes of own mappings live now and at the peak.
+    struct Kept {
+        slots: [Spare; SLOTS],
+        live: usize,
+        peak: usize,
+    }
 
-    /// A kept mapping made for `size` bytes, or `None` after unmapping every kept one.
-    pub(super) fn take(size: usize) -> Option<*mut u8> {
-        let mut dropped = [Spare(std::ptr::null_mut(), 0); SLOTS];
-        {
-            // Nothing here panics while the lock is held; a poisoned lock is still usable.
-            let mut kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
-            if let Some(slot) = kept.iter_mut().find(|s| s.1 == size) {
-                let p = slot.0;
-                *slot = Spare(std::ptr::null_mut(), 0);
-                return Some(p);
-            }
-            std::mem::swap(&mut *kept, &mut dropped);
+    impl Kept {
+        fn kept(&self) -> usize {
+            self.slots.iter().map(|s| s.1).sum()
         }
-        for spare in dropped.iter().filter(|s| s.1 > 0) {
-            super::unmap(spare.0, spare.1);
+
+        fn remove(&mut self, i: usize) -> Spare {
+            std::mem::replace(&mut self.slots[i], EMPTY)
         }
+    }
+
+    static KEPT: Mutex<Kept> = Mutex::new(Kept {
+        slots: [EMPTY; SLOTS],
+        live: 0,
+        peak: 0,
+    });
+
+    fn lock() -> std::sync::MutexGuard<'static, Kept> {
+        // Nothing here panics while the lock is held; a poisoned lock is still usable.
+        KEPT.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Account for a new mapping of `len` bytes: a kept one to reuse (of that length, or
+    /// the head of a longer one whose tail is unmapped here), or `None` for a fresh one,
+    /// after unmapping here the kept ones it displaces (see the module documentation).
+    /// [`gone`] takes it back if a fresh mapping fails.
+    pub(super) fn take(len: usize) -> Option<*mut u8> {
+        let mut k = lock();
+        k.live += len;
+        k.peak = k.peak.max(k.live);
+        if let Some(i) = k.slots.iter().position(|s| s.1 == len) {
+            return Some(k.remove(i).0);
+        }
+        if k.live + k.kept() <= k.peak {
+            return None;
+        }
+        let longer = (0..SLOTS)
+            .filter(|&i| k.slots[i].1 > len)
+            .min_by_key(|&i| k.slots[i].1);
+        if let Some(i) = longer {
+            let Spare(p, l) = k.remove(i);
+            drop(k);
+            super::unmap(p.wrapping_add(len), l - len);
+            return Some(p);
+        }
+        let mut dropped = [EMPTY; SLOTS];
+        while k.live + k.kept() > k.peak {
+            let Some(i) = (0..SLOTS)
+                .filter(|&i| k.slots[i].1 > 0)
+                .min_by_key(|&i| k.slots[i].1)
+            else {
+                break;
+            };
+            dropped[i] = k.remove(i);
+        }
+        drop(k);
+        unmap_all(&dropped);
         None
     }
 
-    /// How many mappings are kept now.
-    #[cfg(test)]
-    pub(super) fn count() -> usize {
-        let kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
-        kept.iter().filter(|s| s.1 > 0).count()
+    /// A mapping of `len` bytes is gone (unmapped, or never made).
+    pub(super) fn gone(len: usize) {
+        lock().live -= len;
     }
 
-    /// Keep the mapping at `ptr`, made for `size` bytes; `false` when every slot is full
-    /// (the caller unmaps it).
-    pub(super) fn keep(ptr: *mut u8, size: usize) -> bool {
-        let mut kept = KEPT.lock().unwrap_or_else(|e| e.into_inner());
-        match kept.iter_mut().find(|s| s.1 == 0) {
-            Some(slot) => {
-                *slot = Spare(ptr, size);
+    /// Keep the mapping at `ptr` of `len` bytes, freed; `false` when every slot is full
+    /// (the caller unmaps it, then calls [`gone`]).
+    pub(super) fn keep(ptr: *mut u8, len: usize) -> bool {
+        let mut k = lock();
+        match k.slots.iter().position(|s| s.1 == 0) {
+            Some(i) => {
+                k.slots[i] = Spare(ptr, len);
+                k.live -= len;
                 true
             }
             None => false,
         }
     }
+
+    /// Unmap the mappings in `dropped`, taken out of the kept ones.
+    fn unmap_all(dropped: &[Spare; SLOTS]) {
+        for spare in dropped.iter().filter(|s| s.1 > 0) {
+            super::unmap(spare.0, spare.1);
+        }
+    }
+
+    /// Unmap every kept mapping (tests start from none kept).
+    #[cfg(test)]
+    pub(super) fn clear() {
+        let mut dropped = [EMPTY; SLOTS];
+        std::mem::swap(&mut lock().slots, &mut dropped);
+        unmap_all(&dropped);
+    }
+
+    /// How many mappings are kept now, their bytes, and the bytes live and at the peak.
+    #[cfg(test)]
+    pub(super) fn state() -> (usize, usize, usize, usize) {
+        let k = lock();
+        let count = k.slots.iter().filter(|s| s.1 > 0).count();
+        (count, k.kept(), k.live, k.peak)
+    }
 }
 
 /// The length of the mapping that holds `size` bytes: whole huge pages, so that the tail
 /// of a buffer is on a huge page too (a 1920×1080 plane of `f32` is 3.96 huge pages; on
-/// small pages its last 1.9 MiB alone took 490 faults).
-#[cfg(target_os = "linux")]
+/// small pages its last 1.9 MiB alone took 490 faults). `size` is a layout's, at most
+/// `isize::MAX`, so this does not overflow.
 fn mapping_len(size: usize) -> usize {
     size.next_multiple_of(HUGE_PAGE)
 }
 
-/// A private anonymous mapping of at least `size` bytes starting at a 2 MiB boundary,
-/// marked for huge pages; null when the kernel refuses the memory.
+/// An own mapping for `size` bytes, kept or fresh (see `spares`), and whether it is
+/// fresh (reads as zero); null when the kernel refuses the memory.
+fn own(size: usize) -> (*mut u8, bool) {
+    let len = mapping_len(size);
+    match spares::take(len) {
+        Some(p) => (p, false),
+        None => {
+            let p = map_huge(len);
+            if p.is_null() {
+                spares::gone(len);
+            }
+            (p, true)
+        }
+    }
+}
+
+/// A private anonymous mapping of `len` bytes, a multiple of [`HUGE_PAGE`], starting at
+/// a 2 MiB boundary, marked for huge pages; null when the kernel refuses the memory.
 #[cfg(target_os = "linux")]
-fn map_huge(size: usize) -> *mut u8 {
+fn map_huge(len: usize) -> *mut u8 {
     use rustix::mm::{Advice, MapFlags, ProtFlags, madvise, mmap_anonymous, munmap};
-    let Some(len) = size.checked_next_multiple_of(HUGE_PAGE) else {
-        return std::ptr::null_mut();
-    };
     let Some(reserve) = len.checked_add(HUGE_PAGE) else {
         return std::ptr::null_mut();
     };
@@ -241,13 +333,14 @@ fn map_huge(size: usize) -> *mut u8 {
     start
 }
 
-/// Unmap what [`map_huge`] mapped for `size` bytes at `ptr`.
+/// Unmap `len` bytes at `ptr`: a whole mapping made by [`map_huge`], or its tail from a
+/// huge-page boundary.
 #[cfg(target_os = "linux")]
-fn unmap(ptr: *mut u8, size: usize) {
-    // SAFETY: `ptr` and the length are those of a mapping made by `map_huge(size)` and
-    // not yet unmapped (the `dealloc` contract).
+fn unmap(ptr: *mut u8, len: usize) {
+    // SAFETY: `ptr` and `len` lie within a mapping made by `map_huge` that no one uses
+    // any more (freed by `dealloc`'s contract, or a kept one taken out of `spares`).
     unsafe {
-        let _ = rustix::mm::munmap(ptr.cast(), mapping_len(size));
+        let _ = rustix::mm::munmap(ptr.cast(), len);
     }
 }
 
@@ -321,7 +414,7 @@ mod tests {
     /// A large block is its own mapping, starting on a 2 MiB boundary and marked for huge
     /// pages (`hg` in the mapping's `VmFlags` in `/proc/self/smaps`, whatever the
     /// system's huge-page setting); freed, it is kept and handed out again for the same
-    /// size, and an allocation of another size unmaps what is kept.
+    /// length (whole huge pages), zeroed when asked.
     #[cfg(target_os = "linux")]
     #[test]
     fn a_large_block_is_an_aligned_mapping_advised_for_huge_pages_and_reused() {
@@ -344,7 +437,7 @@ mod tests {
         };
         let a = HugePages;
         let layout = Layout::from_size_align(5 * HUGE_PAGE + 123, 4).unwrap();
-        let other = Layout::from_size_align(7 * HUGE_PAGE, 4).unwrap();
+        let same_length = Layout::from_size_align(6 * HUGE_PAGE, 4).unwrap();
         // SAFETY: non-zero sizes, each block freed with its layout.
         unsafe {
             let p = a.alloc(layout);
@@ -354,19 +447,105 @@ mod tests {
             assert!(flags.split_whitespace().any(|f| f == "hg"), "{flags}");
             p.write_bytes(7, layout.size());
             a.dealloc(p, layout);
-            assert!(spares::count() >= 1);
-            let q = a.alloc_zeroed(layout);
+            assert!(spares::state().0 >= 1);
+            let q = a.alloc_zeroed(same_length);
             assert_eq!(q, p, "the freed mapping is reused");
             assert!(
-                std::slice::from_raw_parts(q, layout.size())
+                std::slice::from_raw_parts(q, same_length.size())
                     .iter()
                     .all(|&b| b == 0)
             );
-            a.dealloc(q, layout);
-            let r = a.alloc(other);
-            assert!(!r.is_null());
-            assert_eq!(spares::count(), 0, "a miss unmaps what is kept");
-            a.dealloc(r, other);
+            a.dealloc(q, same_length);
         }
+    }
+
+    /// An allocation of a length none of the kept mappings has takes the head of the
+    /// shortest longer one and leaves the others kept (it used to unmap them all, so that
+    /// in `video` each PNG's output buffer sent the next frame's planes to fresh pages).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_miss_takes_the_shortest_longer_mapping_and_keeps_the_rest() {
+        let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+        let a = HugePages;
+        let plane = Layout::from_size_align(4 * HUGE_PAGE - 4096, 64).unwrap();
+        let wide = Layout::from_size_align(9 * HUGE_PAGE, 64).unwrap();
+        let file = Layout::from_size_align(HUGE_PAGE + 17, 1).unwrap();
+        spares::clear();
+        // SAFETY: non-zero sizes, each block freed with its layout.
+        unsafe {
+            let (p, q, w) = (a.alloc(plane), a.alloc(plane), a.alloc(wide));
+            assert!(!p.is_null() && !q.is_null() && !w.is_null());
+            fill(p, plane.size());
+            a.dealloc(p, plane);
+            a.dealloc(q, plane);
+            a.dealloc(w, wide);
+            assert_eq!(spares::state().0, 3);
+            let f = a.alloc_zeroed(file);
+            assert!([p, q].contains(&f), "the head of a kept plane's mapping");
+            assert!(
+                std::slice::from_raw_parts(f, file.size())
+                    .iter()
+                    .all(|&b| b == 0)
+            );
+            assert_eq!(spares::state().0, 2, "the others stay kept");
+            let other = if f == p { q } else { p };
+            let r = a.alloc(plane);
+            assert_eq!(r, other, "the other plane's mapping is reused");
+            let v = a.alloc(wide);
+            assert_eq!(v, w, "so is the wide one");
+            fill(f, file.size());
+            assert!(holds_pattern(f, file.size()));
+            a.dealloc(f, file);
+            a.dealloc(r, plane);
+            a.dealloc(v, wide);
+        }
+    }
+
+    /// Whatever the order of allocations and frees, the mappings live and kept together
+    /// never exceed the peak of those live, and every block keeps what is written to it.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn live_and_kept_mappings_stay_under_the_peak() {
+        let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+        let a = HugePages;
+        let mut rng = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = |n: u64| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng % n) as usize
+        };
+        let mut held: Vec<(*mut u8, Layout)> = Vec::new();
+        let mut peak_seen = 0;
+        spares::clear();
+        for _ in 0..400 {
+            if held.len() < 12 && (held.is_empty() || next(3) > 0) {
+                let size = HUGE_PAGE + next(6) * HUGE_PAGE + next(3) * 4096;
+                let layout = Layout::from_size_align(size, 8).unwrap();
+                // SAFETY: a non-zero size; freed below with this layout.
+                let p = unsafe { a.alloc(layout) };
+                assert!(!p.is_null());
+                fill(p, size.min(3 * 4096));
+                held.push((p, layout));
+            } else {
+                let (p, layout) = held.swap_remove(next(held.len() as u64));
+                assert!(holds_pattern(p, layout.size().min(3 * 4096)));
+                // SAFETY: allocated above with `layout`, freed once.
+                unsafe { a.dealloc(p, layout) };
+            }
+            let live: usize = held.iter().map(|(_, l)| mapping_len(l.size())).sum();
+            peak_seen = peak_seen.max(live);
+            let (_, kept, live_counted, peak) = spares::state();
+            assert_eq!(live_counted, live);
+            assert!(
+                live_counted + kept <= peak,
+                "{live_counted} + {kept} > {peak}"
+            );
+        }
+        for (p, layout) in held {
+            // SAFETY: allocated above with `layout`, freed once.
+            unsafe { a.dealloc(p, layout) };
+        }
+        assert!(peak_seen > 0);
     }
 }
