@@ -79,7 +79,7 @@
 
 use crate::colour::{self, Chromaticities, Mat3, REC709};
 use crate::limits::saturating_f32;
-use crate::simd::Isa;
+use crate::simd::{self, Isa};
 use crate::{DisplayImage, Error, HdrImage, Limits, Result};
 use exr::block::chunk::TileCoordinates;
 use exr::math::Vec2;
@@ -1017,8 +1017,9 @@ fn zip_block(data: &[u8], expected_len: usize, out: &mut Vec<u8>) -> Result<()> 
 /// (`t[0] = d[0]`, `t[i] = t[i−1] + d[i] − 128`, wrapping bytes) and the split of the
 /// bytes into two halves (`out[2k] = t[k]`, `out[2k+1] = t[h+k]`, `h = ⌈n/2⌉`), in one
 /// pass: two running sums, one through each half, the second started from the sum over
-/// the whole first half (a separate pass that vectorises). `src` and `dst` have the same
-/// length.
+/// the whole first half (a separate pass that vectorises), 16 bytes of each at a time
+/// where the processor allows ([`simd::exr_unpredict_pairs`]). `src` and `dst` have the
+/// same length.
 fn reconstruct(src: &[u8], dst: &mut [u8]) {
     let n = src.len();
     debug_assert_eq!(dst.len(), n);
@@ -1029,32 +1030,14 @@ fn reconstruct(src: &[u8], dst: &mut [u8]) {
     // t[h−1] = d[0] + Σ_{i=1}^{h−1} (d[i] − 128): the byte sum minus (h − 1)·128.
     let sum = first.iter().fold(0u8, |s, &v| s.wrapping_add(v));
     let odd_count = ((first.len() - 1) & 1) as u8;
-    let mut b = sum.wrapping_sub(odd_count.wrapping_mul(128));
-    // Two steps at a time, so that the parity of i is fixed at each: the sums carry the
-    // plain bytes (one addition per byte on each dependency chain) and the −128·i of the
-    // predictor, 0 or 128 by the parity of i, is applied to the output only. Here `a` is
-    // Σ_{i≤k} d[i] = t[k] + 128·k and `b` is t[h+k] + 128·(k+1).
-    let mut a = 0u8;
-    let quads = dst.chunks_exact_mut(4);
-    for ((out, da), db) in quads.zip(first.chunks_exact(2)).zip(second.chunks_exact(2)) {
-        a = a.wrapping_add(da[0]);
-        b = b.wrapping_add(db[0]);
-        out[0] = a;
-        out[1] = b ^ 0x80;
-        a = a.wrapping_add(da[1]);
-        b = b.wrapping_add(db[1]);
-        out[2] = a ^ 0x80;
-        out[3] = b;
-    }
-    // After an even number of steps `b` is t itself, and `a` is t + 128 (t[−1] taken as
-    // 128 when there were none, so that t[0] = d[0]).
-    let mut a = a ^ 0x80;
-    let done = second.len() / 2 * 2;
-    if done < second.len() {
-        a = a.wrapping_add(first[done] ^ 0x80);
-        b = b.wrapping_add(second[done] ^ 0x80);
-        dst[2 * done] = a;
-        dst[2 * done + 1] = b;
+    let b = sum.wrapping_sub(odd_count.wrapping_mul(128));
+    // t[−1] taken as 128, so that t[0] = d[0].
+    let (done, mut a, mut b) = simd::exr_unpredict_pairs(first, second, 0x80, b, dst);
+    for k in done..second.len() {
+        a = a.wrapping_add(first[k] ^ 0x80);
+        b = b.wrapping_add(second[k] ^ 0x80);
+        dst[2 * k] = a;
+        dst[2 * k + 1] = b;
     }
     if n % 2 == 1 {
         dst[n - 1] = a.wrapping_add(first[first.len() - 1] ^ 0x80);
