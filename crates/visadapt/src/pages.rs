@@ -62,7 +62,9 @@ fn own_mapping(layout: &Layout) -> bool {
 // anonymous mapping starting at a 2 MiB boundary; `len >= layout.size()` and the start is
 // aligned to 2 MiB, hence to `layout.align()` (checked by `own_mapping`). `dealloc` gets
 // the same layout as `alloc` (the `GlobalAlloc` contract), recomputes the same `len` and
-// unmaps exactly that range. Nothing here allocates.
+// keeps or unmaps exactly that range; a kept mapping is handed out again only as a whole
+// for the same `len`, or cut to a shorter `len` (its tail unmapped), and never to two
+// owners (`spares` takes it out under its lock). Nothing here allocates.
 unsafe impl GlobalAlloc for HugePages {
     #[inline]
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {

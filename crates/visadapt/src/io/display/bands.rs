@@ -157,8 +157,8 @@ pub(super) fn fdeflate_stream<R>(
 }
 
 /// The buffers of [`fdeflate_stream`], kept by each thread that writes PNGs, so that
-/// frame after frame reuses memory already paged in: allocated afresh, they were about
-/// 400 page faults (memory cleared by the kernel, then by `calloc`) of every 1080p frame
+/// frame after frame reuses memory already paged in: allocated afresh, they were 400 to
+/// 550 page faults (memory cleared by the kernel, then by `calloc`) of every 1080p frame
 /// in `video`. Kept only up to [`SCRATCH_KEPT_MAX_BYTES`].
 #[derive(Default)]
 struct Scratch {
