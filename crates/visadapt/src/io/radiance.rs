@@ -35,6 +35,7 @@
 
 use crate::colour::{self, Chromaticities, Mat3, RADIANCE_DEFAULT, Xy};
 use crate::limits::saturating_f32;
+use crate::simd::{Isa, at_level};
 use crate::{Error, HdrImage, Limits, Projection, Result, View};
 
 /// The format name used in errors and in [`Limits::check`].
@@ -879,6 +880,17 @@ impl Converter {
     /// Convert one planar scanline (`len` red, green, blue mantissas then exponents) into
     /// the X, Y, Z rows, each `len` long.
     fn convert(&self, scan: &[u8], xs: &mut [f32], ys: &mut [f32], zs: &mut [f32]) {
+        self.convert_at(Isa::detect(), scan, xs, ys, zs);
+    }
+
+    /// [`Converter::convert`] compiled for `isa` (the same operations, no fused
+    /// multiply-adds: the same bits at every level, tested).
+    fn convert_at(&self, isa: Isa, scan: &[u8], xs: &mut [f32], ys: &mut [f32], zs: &mut [f32]) {
+        at_level!(isa, self.convert_inlined(scan, xs, ys, zs));
+    }
+
+    #[inline(always)]
+    fn convert_inlined(&self, scan: &[u8], xs: &mut [f32], ys: &mut [f32], zs: &mut [f32]) {
         let len = xs.len();
         let (r, rest) = scan.split_at(len);
         let (g, rest) = rest.split_at(len);
@@ -906,7 +918,7 @@ impl Converter {
     /// Single-precision conversion, written to vectorise: the scale `2^(e − 136)` is
     /// built from its bits (`(e − 9) << 23`, valid for `e` ≥ 10; 0 for `e` = 0).
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)]
     fn convert32(
         &self,
         r: &[u8],
@@ -1076,6 +1088,37 @@ mod tests {
                 .wrapping_mul(6_364_136_223_846_793_005)
                 .wrapping_add(1_442_695_040_888_963_407);
             (s >> 33) as usize
+        }
+    }
+
+    /// The scanline conversion gives the same bits at every instruction-set level, on the
+    /// f32 path and on the f64 one (exponents 1..=9), with and without `EXPOSURE`.
+    #[test]
+    fn conversion_is_the_same_at_every_level() {
+        let mut next = lcg(77);
+        for header_text in [
+            "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 1 +X 1\n",
+            "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\nEXPOSURE=0.37\n\n-Y 1 +X 1\n",
+            "#?RADIANCE\nFORMAT=32-bit_rle_xyze\n\n-Y 1 +X 1\n",
+        ] {
+            let (header, _) = parse_header(header_text.as_bytes()).unwrap();
+            let conv = Converter::new(&header).unwrap();
+            for tiny in [false, true] {
+                let len = 1000;
+                let mut scan: Vec<u8> = (0..4 * len).map(|_| next() as u8).collect();
+                for e in &mut scan[3 * len..] {
+                    *e = if tiny { (*e % 12) + 1 } else { 100 + *e % 60 };
+                }
+                let rows = |isa: Isa| {
+                    let (mut x, mut y, mut z) = (vec![0f32; len], vec![0f32; len], vec![0f32; len]);
+                    conv.convert_at(isa, &scan, &mut x, &mut y, &mut z);
+                    [x, y, z].map(|p| p.iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+                };
+                let baseline = rows(Isa::Baseline);
+                for isa in Isa::all_available() {
+                    assert_eq!(rows(isa), baseline, "{isa:?} {header_text:?} {tiny}");
+                }
+            }
         }
     }
 
