@@ -1227,16 +1227,21 @@ impl Grid {
         let row = |(j, (((x, y), z), s)): RowPlanes| {
             crate::simd::at_level!(isa, self.veil_row(looks, j, [x, y, z, s], veils, keep))
         };
+        // The rows' sums are added in row order: a parallel sum's order follows the work
+        // stealing, so its rounding changed from run to run (seen in
+        // `a_workspace_gives_fresh_results_bit_for_bit`: the mean veil off in its last bit).
         #[cfg(feature = "rayon")]
         let total: f64 = {
             use rayon::prelude::*;
-            x.par_chunks_mut(width)
+            let rows: Vec<f64> = x
+                .par_chunks_mut(width)
                 .zip(y.par_chunks_mut(width))
                 .zip(z.par_chunks_mut(width))
                 .zip(s.par_chunks_mut(width))
                 .enumerate()
                 .map(row)
-                .sum()
+                .collect();
+            rows.iter().sum()
         };
         #[cfg(not(feature = "rayon"))]
         let total: f64 = x

@@ -830,9 +830,10 @@ fn summarise(jnd: &[f32]) -> (usize, f64, f32) {
     #[cfg(feature = "rayon")]
     {
         use rayon::prelude::*;
-        jnd.par_chunks(CHUNK)
-            .map(chunk)
-            .reduce(|| (0, 0.0, 0.0), add)
+        // Added in chunk order, as without rayon: a parallel reduction's order (and so the
+        // rounding of the f64 sum) follows the work stealing.
+        let chunks: Vec<(usize, f64, f32)> = jnd.par_chunks(CHUNK).map(chunk).collect();
+        chunks.into_iter().fold((0, 0.0, 0.0), add)
     }
     #[cfg(not(feature = "rayon"))]
     {
