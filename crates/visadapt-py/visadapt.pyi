@@ -147,10 +147,13 @@ def write(
     data: Union[HdrImage, Array],
     *,
     bits: int = 8,
+    png_compression: str = "fast",
     quality: int = 90,
     display_max: float = 80.0,
 ) -> None:
     """Write .png/.jpg/.exr atomically.
+
+    `png_compression`: "fast", "fastest", "rle" or "fdeflate" (lossless at every level).
 
     `data`: a display image (H x W x 3, linear sRGB relative to display_max cd/m²), an
     HdrImage (.exr) or an H x W plane in cd/m² (.exr).

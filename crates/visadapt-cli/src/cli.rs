@@ -334,6 +334,22 @@ impl LimitsArgs {
     }
 }
 
+/// Compression of PNG output (map, sequence, video).
+#[derive(Debug, Clone, Args)]
+pub struct PngArgs {
+    /// Compression of PNG output, lossless at every level (the same pixels)
+    /// [default: fast; fdeflate for video].
+    #[arg(long, value_enum, value_name = "LEVEL")]
+    pub png_compression: Option<PngLevel>,
+}
+
+impl PngArgs {
+    /// The chosen level, or the command's `default`.
+    pub fn level(&self, default: PngLevel) -> visadapt::io::display::PngCompression {
+        self.png_compression.unwrap_or(default).into()
+    }
+}
+
 impl ViewingArgs {
     /// The library's viewing conditions from these flags and the groups a command has
     /// (`None` for a group it lacks: the library default). The view needs the image's
@@ -455,7 +471,8 @@ impl MapArgs {
         FormatArg::from_extension(&ext)
     }
 
-    /// `--bits` is for PNG output and `--quality` for JPEG: refuse them with another format;
+    /// `--bits` and `--png-compression` are for PNG output and `--quality` for JPEG: refuse
+    /// them with another format;
     /// `--format` must agree with the output file's extension.
     fn check_format_flags(&self) -> Result<(), String> {
         if self.output.as_os_str() == "-" && self.inputs.len() > 1 {
@@ -488,6 +505,12 @@ impl MapArgs {
                 self.output.display()
             ));
         }
+        if self.png.png_compression.is_some() && kind != Some(FormatArg::Png) {
+            return Err(format!(
+                "--png-compression applies to PNG output only, not to '{}'",
+                self.output.display()
+            ));
+        }
         if self.quality.is_some() && kind != Some(FormatArg::Jpeg) {
             return Err(format!(
                 "--quality applies to JPEG output only, not to '{}'",
@@ -501,7 +524,7 @@ impl MapArgs {
 /// The values of `--format`: the display-image formats `map` writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum FormatArg {
-    /// PNG, sRGB, 8 or 16 bits (--bits).
+    /// PNG, sRGB, 8 or 16 bits (--bits, --png-compression).
     Png,
     /// JPEG, sRGB (--quality).
     #[value(alias = "jpg")]
@@ -608,6 +631,9 @@ pub struct MapArgs {
     /// JPEG quality (1-100) [default: 90].
     #[arg(long, value_name = "Q", value_parser = clap::value_parser!(u8).range(1..=100))]
     pub quality: Option<u8>,
+
+    #[command(flatten)]
+    pub png: PngArgs,
 
     #[command(flatten)]
     pub limits: LimitsArgs,
@@ -1055,6 +1081,9 @@ pub struct SequenceArgs {
     pub limits: LimitsArgs,
 
     #[command(flatten)]
+    pub png: PngArgs,
+
+    #[command(flatten)]
     pub time_course: TimeCourseArgs,
 
     /// Print the list of frames as JSON.
@@ -1089,12 +1118,12 @@ impl VideoFormat {
     }
 }
 
-/// PNG compression of `video` frames (all lossless: the same pixels; see
+/// A PNG compression level (all lossless: the same pixels; see
 /// `visadapt::io::display::PngCompression`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum PngLevel {
-    /// Adaptive row filter, then deflate level 1 in parallel row bands (the level of
-    /// `map`).
+    /// Adaptive row filter, then deflate level 1 in parallel row bands (the default of
+    /// map and sequence).
     Fast,
     /// Up filter, then deflate level 1 in row bands: larger files than fast.
     Fastest,
@@ -1103,7 +1132,7 @@ pub enum PngLevel {
     Rle,
     /// Adaptive row filter, then fdeflate (the png crate's fast path): the least CPU
     /// time per frame on textured and photographic frames, files about the size of rle's
-    /// (the default).
+    /// (the default of video).
     Fdeflate,
 }
 
@@ -1161,9 +1190,8 @@ pub struct VideoArgs {
     #[arg(long, value_enum, default_value_t = VideoFormat::Png)]
     pub format: VideoFormat,
 
-    /// Compression of PNG frames (lossless at every level: the same pixels).
-    #[arg(long, value_enum, value_name = "LEVEL", default_value_t = PngLevel::Fdeflate)]
-    pub png_compression: PngLevel,
+    #[command(flatten)]
+    pub png: PngArgs,
 
     /// Multiply every frame's values by S to get cd/m² (one factor for all frames, so the
     /// changes between frames are kept).

@@ -110,6 +110,90 @@ fn map_other_outputs() {
 }
 
 #[test]
+fn png_compression_changes_the_file_not_the_pixels() {
+    // `map` at every level, a 16-bit one, and `sequence`'s frames: the same samples as
+    // the default level in a file of that level (the library's encoder at that level,
+    // byte for byte, is `io`'s test).
+    let dir = tempfile::tempdir().unwrap();
+    let map = |name: &str, extra: &[&str]| {
+        let p = dir.path().join(name);
+        succeed(
+            visadapt()
+                .arg("map")
+                .arg(data("mixtex.hdr"))
+                .arg("-o")
+                .arg(&p)
+                .args(extra),
+        );
+        (std::fs::read(&p).unwrap(), read_png(&p))
+    };
+    let (fast_bytes, fast) = map("default.png", &[]);
+    for level in ["fast", "fastest", "rle", "fdeflate"] {
+        let (bytes, png) = map(&format!("{level}.png"), &["--png-compression", level]);
+        assert!(png.samples == fast.samples, "{level}: other pixels");
+        assert_eq!(bytes == fast_bytes, level == "fast", "{level}");
+    }
+    let (_, wide) = map("wide.png", &["--bits", "16"]);
+    let (wide_rle_bytes, wide_rle) = map(
+        "wide-rle.png",
+        &["--bits", "16", "--png-compression", "rle"],
+    );
+    assert!(wide_rle.samples == wide.samples);
+    assert!(wide_rle_bytes != std::fs::read(dir.path().join("wide.png")).unwrap());
+
+    let sequence = |out: &str, extra: &[&str]| {
+        succeed(
+            visadapt()
+                .arg("sequence")
+                .arg(data("mixtex.hdr"))
+                .args(["--from", "100", "--to", "0.1", "--times", "0,30", "-o"])
+                .arg(dir.path().join(out))
+                .args(extra),
+        );
+    };
+    sequence("seq", &[]);
+    sequence("seq-rle", &["--png-compression", "rle"]);
+    let frames = files_in(&dir.path().join("seq"));
+    assert_eq!(frames, files_in(&dir.path().join("seq-rle")));
+    assert!(frames.len() >= 2, "{frames:?}");
+    for f in frames {
+        let (a, b) = (
+            dir.path().join("seq").join(&f),
+            dir.path().join("seq-rle").join(&f),
+        );
+        assert!(read_png(&a).samples == read_png(&b).samples, "{f}");
+        assert!(
+            std::fs::read(&a).unwrap() != std::fs::read(&b).unwrap(),
+            "{f}"
+        );
+    }
+
+    // Not for other formats: refused before anything is written.
+    let out = visadapt()
+        .arg("video")
+        .arg(dir.path().join("f_%d.exr"))
+        .args([
+            "--fps",
+            "24",
+            "--format",
+            "exr",
+            "--png-compression",
+            "rle",
+            "-o",
+        ])
+        .arg(dir.path().join("frames"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let e = one_line_error(&out.stderr);
+    assert!(
+        e.contains("--png-compression") && e.contains("--format exr"),
+        "{e}"
+    );
+    assert!(!dir.path().join("frames").exists());
+}
+
+#[test]
 fn map_text_report_names_what_it_used() {
     let dir = tempfile::tempdir().unwrap();
     visadapt()

@@ -612,12 +612,8 @@ fn video_pipeline_writes_the_same_bytes_as_one_frame_after_another() {
         visadapt::operator::apply_state_into(&scene, &report, state, &conditions, &mut display)
             .unwrap();
         let expected = dir.path().join(format!("expected{n}.png"));
-        visadapt::io::write_display(
-            &display,
-            &expected,
-            visadapt::io::OutputFormat::Png { bits: 8 },
-        )
-        .unwrap();
+        visadapt::io::write_display(&display, &expected, visadapt::io::OutputFormat::png(8))
+            .unwrap();
         // Compared as a boolean: a failure should name the frame, not print two PNGs.
         let same = std::fs::read(outdir.join(format!("s{n}.png"))).unwrap()
             == std::fs::read(&expected).unwrap();
@@ -740,7 +736,7 @@ fn sequence_label_time_changes_only_the_box() {
     let mut expected = Vec::new();
     sequence::render(&scene, &seq, &Default::default(), |f| {
         let path = dir.path().join(format!("lib-{}.png", f.index));
-        visadapt::io::write_display(f.image, &path, visadapt::io::OutputFormat::Png { bits: 8 })?;
+        visadapt::io::write_display(f.image, &path, visadapt::io::OutputFormat::png(8))?;
         expected.push(std::fs::read(&path).unwrap());
         Ok(())
     })

@@ -117,6 +117,7 @@ fn format_flags_for_another_format_are_refused() {
         ("--bits", "16", "x.jpg"),
         ("--bits", "8", "x.exr"),
         ("--quality", "50", "x.png"),
+        ("--png-compression", "rle", "x.tif"),
     ] {
         let out = visadapt()
             .current_dir(dir.path())

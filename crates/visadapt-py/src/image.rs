@@ -348,22 +348,29 @@ pub fn chart(py: Python<'_>, white: f64, fov: Option<f64>, gratings: bool) -> Py
 ///         `map` returns) for any format; an `HdrImage` (.exr only: X, Y, Z in cd/m² and
 ///         scotopic); or one H × W plane in cd/m², e.g. a `tolerance` map (.exr only).
 ///     bits: 8 or 16 bits per channel for PNG.
+///     png_compression: "fast" (the default), "fastest", "rle" or "fdeflate" for PNG:
+///         lossless at every level (the same pixels), different file sizes and times.
 ///     quality: 1 to 100 for JPEG.
 ///     display_max: the display maximum in cd/m² that 1.0 stands for, recorded in an EXR
 ///         display image (`whiteLuminance`); give the one passed to `map`.
 #[pyfunction]
-#[pyo3(signature = (path, data, *, bits = 8, quality = 90, display_max = 80.0))]
+#[pyo3(signature = (path, data, *, bits = 8, png_compression = "fast", quality = 90, display_max = 80.0))]
+#[allow(clippy::too_many_arguments)]
 pub fn write(
     py: Python<'_>,
     path: PathBuf,
     data: &Bound<'_, PyAny>,
     bits: u8,
+    png_compression: &str,
     quality: u8,
     display_max: f64,
 ) -> PyResult<()> {
     // An unknown extension is the caller's parameter, not a file's content.
     let format =
         OutputFormat::from_path(&path).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let compression: io::display::PngCompression = png_compression
+        .parse()
+        .map_err(|e: visadapt::Error| PyValueError::new_err(e.to_string()))?;
     let exr_only = || {
         PyValueError::new_err(format!(
             "{}: HDR images and luminance planes are written as OpenEXR (use .exr)",
@@ -404,7 +411,7 @@ pub fn write(
                 display_max_cd_m2: display_max as f32,
             };
             let format = match format {
-                OutputFormat::Png { .. } => OutputFormat::Png { bits },
+                OutputFormat::Png { .. } => OutputFormat::Png { bits, compression },
                 OutputFormat::Jpeg { .. } => OutputFormat::Jpeg { quality },
                 f => f,
             };

@@ -395,6 +395,12 @@ def test_write_png_jpeg_exr(tmp_path):
         assert (tmp_path / name).read_bytes().startswith(magic)
     visadapt.write(tmp_path / "b.png", display, bits=16)
     assert (tmp_path / "b.png").stat().st_size > (tmp_path / "a.png").stat().st_size
+    # Every PNG level holds the same pixels; run-length coding makes another file.
+    visadapt.write(tmp_path / "rle.png", display, png_compression="rle")
+    assert (tmp_path / "rle.png").read_bytes() != (tmp_path / "a.png").read_bytes()
+    assert (visadapt.read(tmp_path / "rle.png").xyz == visadapt.read(tmp_path / "a.png").xyz).all()
+    with pytest.raises(ValueError, match="fdeflate"):
+        visadapt.write(tmp_path / "c.png", display, png_compression="zip")
     with pytest.raises(ValueError, match="bit"):
         visadapt.write(tmp_path / "c.png", display, bits=12)
     with pytest.raises(ValueError, match="OpenEXR"):

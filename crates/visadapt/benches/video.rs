@@ -20,6 +20,7 @@
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::path::{Path, PathBuf};
 use visadapt::io::OutputFormat;
+use visadapt::io::display::PngCompression;
 use visadapt::operator::ViewingConditions;
 use visadapt::video::{self, FileFrames, FileSink, Observer, Threads};
 use visadapt::{DisplayImage, HdrImage, Limits, View};
@@ -128,7 +129,10 @@ fn bench(c: &mut Criterion) {
         let outputs = (0..FRAMES)
             .map(|k| output.join(format!("f_{k:03}.png")))
             .collect();
-        let sink = FileSink::new(outputs, OutputFormat::Png { bits: 8 });
+        let sink = FileSink::new(
+            outputs,
+            OutputFormat::png(8).with_png_compression(PngCompression::Fdeflate),
+        );
         let id = BenchmarkId::new(format!("frames/{ext}"), &size);
         group.bench_function(id, |b| {
             b.iter(|| run_sequence(&frames, &sink, Threads::default()))

@@ -69,7 +69,6 @@
 //! ```
 
 use crate::glare;
-use crate::io::display::PngCompression;
 use crate::io::{self, OutputFormat};
 use crate::local::AdaptationMap;
 use crate::operator::{self, Mapping, PixelStats, Report, ViewingConditions};
@@ -241,7 +240,7 @@ impl Default for Threads {
     /// One decoder per two cores the system offers and one encoder per core, from one
     /// to four each: on two cores, one decoder and two encoders. The operator's passes
     /// run on every core and the other stages fill the gaps. A PNG frame's compressor
-    /// ([`PngCompression::Fdeflate`], the default) runs on one thread, so with one
+    /// ([`PngCompression::Fdeflate`](io::display::PngCompression::Fdeflate), `video`'s default) runs on one thread, so with one
     /// encoder the frame rate was bound by encoding; two encoders took the whole process
     /// on 24 1080p frames from 0.82–0.98 s to 0.71–0.83 s (`.hdr`) and from 1.13–1.58 s
     /// to 0.97–1.24 s (`.exr`), for about 31 MiB more memory (see the README's
@@ -648,31 +647,20 @@ impl Source<Error> for FileFrames {
 }
 
 /// Files as a [`Sink`]: frame `k` goes to `paths[k]` in `format`, written atomically
-/// ([`io::display::write_atomically`]: complete or not at all).
+/// ([`io::display::write_atomically`]: complete or not at all). For PNG frames,
+/// [`PngCompression::Fdeflate`](io::display::PngCompression::Fdeflate) spends the least CPU time per frame on textured and
+/// photographic frames (see there), for files about the size of `Rle`'s: the `video`
+/// command's default.
 #[derive(Debug, Clone)]
 pub struct FileSink {
     paths: Vec<PathBuf>,
     format: OutputFormat,
-    png: PngCompression,
 }
 
 impl FileSink {
-    /// Frame `k` to `paths[k]`, in `format`; PNG frames at [`PngCompression::Fdeflate`],
-    /// the video default: the least CPU time per frame of the levels on textured and
-    /// photographic frames (see there), for files about the size of `Rle`'s.
+    /// Frame `k` to `paths[k]`, in `format`.
     pub fn new(paths: Vec<PathBuf>, format: OutputFormat) -> Self {
-        FileSink {
-            paths,
-            format,
-            png: PngCompression::Fdeflate,
-        }
-    }
-
-    /// PNG frames at `png` compression ([`PngCompression::Fdeflate`] unless set).
-    #[must_use]
-    pub fn with_png_compression(mut self, png: PngCompression) -> Self {
-        self.png = png;
-        self
+        FileSink { paths, format }
     }
 
     /// Where frame `index` goes.
@@ -689,35 +677,11 @@ impl Sink<Error> for FileSink {
     type Frame = ();
 
     fn encode(&self, _index: u64, image: &DisplayImage, bytes: &mut Vec<u8>) -> Result<()> {
-        encode_with(image, self.format, self.png, bytes)
+        self.format.encode_into(image, bytes)
     }
 
     fn write(&self, index: u64, bytes: &[u8], (): ()) -> Result<()> {
         write_file(self.path(index)?, bytes)
-    }
-}
-
-/// Encode a display image in `format` into `bytes` (its previous contents replaced, its
-/// memory reused): the file [`io::write_display`] would write, byte for byte.
-pub fn encode(image: &DisplayImage, format: OutputFormat, bytes: &mut Vec<u8>) -> Result<()> {
-    encode_with(image, format, PngCompression::Fast, bytes)
-}
-
-/// [`encode`] with PNGs at `png` compression (other formats are unaffected): with
-/// [`PngCompression::Fastest`], the same pixels in a larger file for less CPU time.
-pub fn encode_with(
-    image: &DisplayImage,
-    format: OutputFormat,
-    png: PngCompression,
-    bytes: &mut Vec<u8>,
-) -> Result<()> {
-    bytes.clear();
-    match format {
-        OutputFormat::Png { bits } => io::display::write_png_with(image, bits, png, &mut *bytes),
-        OutputFormat::Jpeg { quality } => io::display::write_jpeg(image, quality, &mut *bytes),
-        OutputFormat::Exr => io::exr::write_display(image, std::io::Cursor::new(&mut *bytes)),
-        OutputFormat::Tiff => io::tiff::write_display(image, std::io::Cursor::new(&mut *bytes)),
-        OutputFormat::Radiance => io::radiance::write_display(image, &mut *bytes),
     }
 }
 

@@ -140,7 +140,7 @@ fn render_sequence(
     .with_context(|| path.display().to_string())?;
     sequence::render(&chart.image, seq, conditions, |f| {
         let frame = dir.join(format!("{name}-{}.png", f.index));
-        io::write_display(f.image, &frame, OutputFormat::Png { bits: 8 })?;
+        io::write_display(f.image, &frame, OutputFormat::png(8))?;
         apng.push(f.image)?;
         progress.inc(1);
         Ok(())
@@ -162,7 +162,7 @@ fn render(level: f64, dir: &Path, conditions: &ViewingConditions) -> anyhow::Res
     })?;
     let out = operator::map(&chart.image, conditions)?;
     let path = dir.join(panel_name(level));
-    io::write_display(&out.image, &path, OutputFormat::Png { bits: 8 })
+    io::write_display(&out.image, &path, OutputFormat::png(8))
         .with_context(|| path.display().to_string())?;
     let readings = chart.read(&out.image)?;
     let cutoff = out.report.acuity.cutoff_cycles_per_degree;

@@ -6,7 +6,7 @@
 //! its first bytes) or writes standard output (the format from `--format`, PNG by default);
 //! the report then goes to standard error.
 
-use crate::cli::{FormatArg, MapArgs};
+use crate::cli::{FormatArg, MapArgs, PngLevel};
 use crate::numbers::count;
 use crate::report;
 use anyhow::{Context, bail};
@@ -290,7 +290,7 @@ fn shown(path: &Path, stream: &str) -> PathBuf {
 
 fn output_format(args: &MapArgs) -> anyhow::Result<OutputFormat> {
     let format = match args.format_kind() {
-        Some(FormatArg::Png) => OutputFormat::Png { bits: 8 },
+        Some(FormatArg::Png) => OutputFormat::png(8),
         Some(FormatArg::Jpeg) => OutputFormat::Jpeg { quality: 90 },
         Some(FormatArg::Exr) => OutputFormat::Exr,
         Some(FormatArg::Tiff) => OutputFormat::Tiff,
@@ -300,6 +300,7 @@ fn output_format(args: &MapArgs) -> anyhow::Result<OutputFormat> {
     Ok(match format {
         OutputFormat::Png { .. } => OutputFormat::Png {
             bits: args.bits.unwrap_or(8),
+            compression: args.png.level(PngLevel::Fast),
         },
         OutputFormat::Jpeg { .. } => OutputFormat::Jpeg {
             quality: args.quality.unwrap_or(90),

@@ -2,7 +2,7 @@
 //! frames (and optionally one animated PNG), as in the paper's Fig. 12.
 
 use super::timecourse::{positive, sorted_times};
-use crate::cli::SequenceArgs;
+use crate::cli::{PngLevel, SequenceArgs};
 use crate::numbers::num;
 use anyhow::{Context, bail};
 use std::path::PathBuf;
@@ -82,6 +82,7 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
     let mut failed: Option<PathBuf> = None;
     // With --label-time, the frame is labelled in a copy (the sequence reuses its image).
     let mut labelled = DisplayImage::default();
+    let format = io::OutputFormat::png(8).with_png_compression(args.png.level(PngLevel::Fast));
     let result = render_owned(scene, &sequence, &conditions, |frame| {
         let path = args.output.join(frame_name(frame.index, count));
         let image = match sequence.frame_label(frame.index) {
@@ -92,8 +93,7 @@ pub fn run(args: SequenceArgs) -> anyhow::Result<()> {
             }
             _ => frame.image,
         };
-        io::write_display(image, &path, io::OutputFormat::Png { bits: 8 })
-            .inspect_err(|_| failed = Some(path.clone()))?;
+        io::write_display(image, &path, format).inspect_err(|_| failed = Some(path.clone()))?;
         if let (Some(a), Some(apng_path)) = (apng.as_mut(), &args.apng) {
             a.push(image)
                 .inspect_err(|_| failed = Some(apng_path.clone()))?;

@@ -27,7 +27,7 @@
 //! the number of frames. On an error, the frames before it are written, nothing after it
 //! is, and the error names its frame. `--timings` prints where the time went.
 
-use crate::cli::{VideoArgs, VideoFormat};
+use crate::cli::{PngLevel, VideoArgs, VideoFormat};
 use crate::numbers::count;
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -194,6 +194,11 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             args.fps
         );
     }
+    if args.png.png_compression.is_some() && args.format != VideoFormat::Png {
+        let name = clap::ValueEnum::to_possible_value(&args.format)
+            .map_or_else(String::new, |v| v.get_name().to_owned());
+        bail!("--png-compression applies to PNG frames only, not to --format {name}");
+    }
     let stdin = args.pattern == "-";
     let stdout = args.output.as_os_str() == "-";
     let source = match (stdin, args.size) {
@@ -221,7 +226,10 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             let (format, ext) = match args.format {
                 VideoFormat::Jpg => (OutputFormat::Jpeg { quality: 90 }, "jpg"),
                 VideoFormat::Exr => (OutputFormat::Exr, "exr"),
-                _ => (OutputFormat::Png { bits: 8 }, "png"),
+                _ => (
+                    OutputFormat::png(8).with_png_compression(args.png.level(PngLevel::Fdeflate)),
+                    "png",
+                ),
             };
             Sink::Folder {
                 dir: &args.output,
@@ -298,7 +306,6 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
         sink,
         frames,
         progress: progress.clone(),
-        png: args.png_compression.into(),
     };
     // The frame `k`-th of the run is (its number, the file it came from).
     let frame_of = |k: u64| -> (u64, PathBuf) {
@@ -510,8 +517,6 @@ struct Writer<'a> {
     /// The input frames (empty for a stream), to name a frame's file in errors.
     frames: &'a [(u64, PathBuf)],
     progress: ProgressBar,
-    /// Compression of PNG frames.
-    png: visadapt::io::display::PngCompression,
 }
 
 impl video::Sink<anyhow::Error> for Writer<'_> {
@@ -519,16 +524,15 @@ impl video::Sink<anyhow::Error> for Writer<'_> {
 
     fn encode(&self, k: u64, display: &DisplayImage, bytes: &mut Vec<u8>) -> anyhow::Result<()> {
         match self.sink {
-            Sink::Folder { format, .. } => video::encode_with(display, format, self.png, bytes)
-                .with_context(|| {
-                    let (n, input) = usize::try_from(k)
-                        .ok()
-                        .and_then(|k| self.frames.get(k))
-                        .map_or((k, Path::new("-")), |(n, p)| (*n, p.as_path()));
-                    self.sink
-                        .path(input, n)
-                        .map_or_else(|| format!("frame {k}"), |p| p.display().to_string())
-                }),
+            Sink::Folder { format, .. } => format.encode_into(display, bytes).with_context(|| {
+                let (n, input) = usize::try_from(k)
+                    .ok()
+                    .and_then(|k| self.frames.get(k))
+                    .map_or((k, Path::new("-")), |(n, p)| (*n, p.as_path()));
+                self.sink
+                    .path(input, n)
+                    .map_or_else(|| format!("frame {k}"), |p| p.display().to_string())
+            }),
             Sink::Stream(raw) => io::raw::encode_frame(display, raw, bytes)
                 .with_context(|| format!("frame {k}: standard output")),
         }

@@ -80,8 +80,9 @@ fn par_pixels(out: &mut [u8], bytes_per_pixel: usize, f: impl Fn(usize, &mut [u8
 pub enum PngCompression {
     /// The adaptive filter (each row tried with Up, Sub, Average and Paeth, the smallest
     /// sum of absolute values kept: `png`'s `Filter::Adaptive`, the same filtered bytes),
-    /// then zlib-rs's level 1, in parallel row bands. The default of [`write_png`] and of
-    /// every output of the library. Files about 3 % larger than `png`'s own fdeflate path
+    /// then zlib-rs's level 1, in parallel row bands. The default of [`write_png`], of
+    /// [`OutputFormat::png`](crate::io::OutputFormat::png) and of the `map` and
+    /// `sequence` commands. Files about 3 % larger than `png`'s own fdeflate path
     /// at `Compression::Fast` (24 1080p video frames: 11.99 MB against 11.64 MB).
     #[default]
     Fast,
@@ -108,7 +109,7 @@ pub enum PngCompression {
     /// four on textured and photographic frames, for files about the size of
     /// [`PngCompression::Rle`]'s there; on smooth ones `Rle`'s files are smaller (the
     /// 1080p office video above: 7.3 MB against 11.6 MB from `png`'s own path). The
-    /// default of `video`'s PNG frames ([`FileSink`](crate::video::FileSink)). Encoding
+    /// default of the `video` command's PNG frames. Encoding
     /// alone, the shortest of five runs on one thread at load 1.5 (file sizes): the
     /// `video` bench's 1080p frame 27 ms (2.39 MB) against `Rle` 68 ms (2.85 MB) and
     /// `Fast` 39 ms (2.33 MB); the mapped `Tree.exr` (928 × 906) 10 ms (1.35 MB) against
@@ -118,6 +119,25 @@ pub enum PngCompression {
 }
 
 impl PngCompression {
+    /// Every level.
+    pub const ALL: [PngCompression; 4] = [
+        PngCompression::Fast,
+        PngCompression::Fastest,
+        PngCompression::Rle,
+        PngCompression::Fdeflate,
+    ];
+
+    /// The level's name as the command line and the Python package take it: `fast`,
+    /// `fastest`, `rle` or `fdeflate` (parsed back by [`str::parse`]).
+    pub const fn name(self) -> &'static str {
+        match self {
+            PngCompression::Fast => "fast",
+            PngCompression::Fastest => "fastest",
+            PngCompression::Rle => "rle",
+            PngCompression::Fdeflate => "fdeflate",
+        }
+    }
+
     /// `png`'s own sequential encoding at this level (for comparisons: the same filter).
     #[cfg(test)]
     fn png(self) -> png::Compression {
@@ -126,6 +146,31 @@ impl PngCompression {
             PngCompression::Fastest | PngCompression::Rle => png::Compression::Fastest,
             PngCompression::Fdeflate => png::Compression::Fast,
         }
+    }
+}
+
+impl std::str::FromStr for PngCompression {
+    type Err = Error;
+
+    /// A level by its [`name`](PngCompression::name), ignoring ASCII case.
+    ///
+    /// ```
+    /// use visadapt::io::display::PngCompression;
+    /// assert_eq!("RLE".parse::<PngCompression>()?, PngCompression::Rle);
+    /// assert!("zip".parse::<PngCompression>().is_err());
+    /// # Ok::<(), visadapt::Error>(())
+    /// ```
+    fn from_str(s: &str) -> Result<Self> {
+        PngCompression::ALL
+            .into_iter()
+            .find(|c| c.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| {
+                Error::invalid(
+                    "PNG compression",
+                    s,
+                    "must be fast, fastest, rle or fdeflate",
+                )
+            })
     }
 }
 

@@ -235,6 +235,8 @@ pub enum OutputFormat {
     Png {
         /// 8 or 16.
         bits: u8,
+        /// How hard the file is compressed (lossless at every level: the same samples).
+        compression: display::PngCompression,
     },
     /// Baseline JPEG, sRGB-encoded.
     Jpeg {
@@ -253,15 +255,57 @@ pub enum OutputFormat {
 }
 
 impl OutputFormat {
+    /// PNG with `bits` (8 or 16) per channel at the default compression,
+    /// [`PngCompression::Fast`](display::PngCompression::Fast).
+    pub const fn png(bits: u8) -> Self {
+        OutputFormat::Png {
+            bits,
+            compression: display::PngCompression::Fast,
+        }
+    }
+
+    /// This format with PNGs at `compression` (other formats are returned unchanged), e.g.
+    /// for a compression chosen once for whatever format a file name implies.
+    #[must_use]
+    pub const fn with_png_compression(self, compression: display::PngCompression) -> Self {
+        match self {
+            OutputFormat::Png { bits, .. } => OutputFormat::Png { bits, compression },
+            other => other,
+        }
+    }
+
+    /// Encode `image` in this format into `w`. The one place that dispatches on the format:
+    /// [`write_display`], [`write_display_to`] and [`OutputFormat::encode_into`] all write
+    /// through it, so the three give the same file byte for byte.
+    fn encode(self, image: &DisplayImage, w: impl std::io::Write + std::io::Seek) -> Result<()> {
+        match self {
+            OutputFormat::Png { bits, compression } => {
+                display::write_png_with(image, bits, compression, w)
+            }
+            OutputFormat::Jpeg { quality } => display::write_jpeg(image, quality, w),
+            OutputFormat::Exr => exr::write_display(image, w),
+            OutputFormat::Tiff => tiff::write_display(image, w),
+            OutputFormat::Radiance => radiance::write_display(image, w),
+        }
+    }
+
+    /// Encode `image` in this format into `bytes`, its previous contents replaced and its
+    /// memory reused: the file [`write_display`] would write, byte for byte.
+    pub fn encode_into(self, image: &DisplayImage, bytes: &mut Vec<u8>) -> Result<()> {
+        bytes.clear();
+        self.encode(image, std::io::Cursor::new(bytes))
+    }
+
     /// The format implied by a file name's extension (`.png`, `.jpg`/`.jpeg`, `.exr`,
-    /// `.tif`/`.tiff`, `.hdr`), with 8-bit PNG and quality-90 JPEG.
+    /// `.tif`/`.tiff`, `.hdr`), with 8-bit PNG at the default compression and quality-90
+    /// JPEG.
     pub fn from_path(path: &Path) -> Result<Self> {
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
         match ext.as_deref() {
-            Some("png") => Ok(OutputFormat::Png { bits: 8 }),
+            Some("png") => Ok(OutputFormat::png(8)),
             Some("jpg" | "jpeg") => Ok(OutputFormat::Jpeg { quality: 90 }),
             Some("exr") => Ok(OutputFormat::Exr),
             Some("tif" | "tiff") => Ok(OutputFormat::Tiff),
@@ -283,7 +327,7 @@ impl OutputFormat {
 /// let image = DisplayImage { width: 2, height: 1, r: vec![0.5; 2], g: vec![0.5; 2],
 ///                            b: vec![0.5; 2], display_max_cd_m2: 100.0 };
 /// let mut out = Vec::new();
-/// io::write_display_to(&image, OutputFormat::Png { bits: 8 }, &mut out)?;
+/// io::write_display_to(&image, OutputFormat::png(8), &mut out)?;
 /// assert!(out.starts_with(b"\x89PNG"));
 /// # Ok::<(), visadapt::Error>(())
 /// ```
@@ -292,15 +336,9 @@ pub fn write_display_to(
     format: OutputFormat,
     mut w: impl std::io::Write,
 ) -> Result<()> {
-    let mut buf = std::io::Cursor::new(Vec::new());
-    match format {
-        OutputFormat::Png { bits } => display::write_png(image, bits, &mut buf)?,
-        OutputFormat::Jpeg { quality } => display::write_jpeg(image, quality, &mut buf)?,
-        OutputFormat::Exr => exr::write_display(image, &mut buf)?,
-        OutputFormat::Tiff => tiff::write_display(image, &mut buf)?,
-        OutputFormat::Radiance => radiance::write_display(image, &mut buf)?,
-    }
-    w.write_all(buf.get_ref())?;
+    let mut buf = Vec::new();
+    format.encode_into(image, &mut buf)?;
+    w.write_all(&buf)?;
     w.flush()?;
     Ok(())
 }
@@ -308,11 +346,102 @@ pub fn write_display_to(
 /// Write a display image to `path` in `format`, atomically: the file appears complete or
 /// not at all (see [`display::write_atomically`]).
 pub fn write_display(image: &DisplayImage, path: &Path, format: OutputFormat) -> Result<()> {
-    display::write_atomically(path, |w| match format {
-        OutputFormat::Png { bits } => display::write_png(image, bits, w),
-        OutputFormat::Jpeg { quality } => display::write_jpeg(image, quality, w),
-        OutputFormat::Exr => exr::write_display(image, w),
-        OutputFormat::Tiff => tiff::write_display(image, w),
-        OutputFormat::Radiance => radiance::write_display(image, w),
-    })
+    display::write_atomically(path, |w| format.encode(image, w))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use display::PngCompression;
+
+    /// A small display image with a gradient, values beyond the display's range and a
+    /// ragged size, so that filters, clipping and band edges all matter.
+    fn image() -> DisplayImage {
+        let (width, height) = (37, 29);
+        let plane = |k: f32| -> Vec<f32> {
+            (0..width * height)
+                .map(|i| ((i % width) as f32 * 0.031 + (i / width) as f32 * 0.017 * k) % 1.2)
+                .collect()
+        };
+        DisplayImage {
+            width,
+            height,
+            r: plane(1.0),
+            g: plane(2.0),
+            b: plane(3.0),
+            display_max_cd_m2: 80.0,
+        }
+    }
+
+    #[test]
+    fn every_writer_gives_the_same_file_in_every_format() {
+        let image = image();
+        let dir = tempfile::tempdir().unwrap();
+        let mut formats = vec![
+            OutputFormat::png(16),
+            OutputFormat::Jpeg { quality: 75 },
+            OutputFormat::Exr,
+            OutputFormat::Tiff,
+            OutputFormat::Radiance,
+        ];
+        for compression in [
+            PngCompression::Fast,
+            PngCompression::Fastest,
+            PngCompression::Rle,
+            PngCompression::Fdeflate,
+        ] {
+            formats.push(OutputFormat::png(8).with_png_compression(compression));
+        }
+        // A buffer reused from a larger file: its old bytes must not survive.
+        let mut reused = vec![0xA5u8; 1 << 20];
+        for (k, format) in formats.into_iter().enumerate() {
+            let path = dir.path().join(format!("out{k}"));
+            write_display(&image, &path, format).unwrap();
+            let file = std::fs::read(&path).unwrap();
+            let mut streamed = Vec::new();
+            write_display_to(&image, format, &mut streamed).unwrap();
+            format.encode_into(&image, &mut reused).unwrap();
+            assert!(file == streamed, "{format:?}: write_display_to differs");
+            assert!(file == reused, "{format:?}: encode_into differs");
+            if let OutputFormat::Png { bits, compression } = format {
+                let mut direct = Vec::new();
+                display::write_png_with(&image, bits, compression, &mut direct).unwrap();
+                assert!(file == direct, "{format:?}: not the level asked for");
+            }
+        }
+    }
+
+    #[test]
+    fn the_png_compression_is_the_files_and_applies_to_png_only() {
+        let image = image();
+        let bytes = |format: OutputFormat| {
+            let mut v = Vec::new();
+            format.encode_into(&image, &mut v).unwrap();
+            v
+        };
+        let fast = bytes(OutputFormat::png(8));
+        let rle = bytes(OutputFormat::png(8).with_png_compression(PngCompression::Rle));
+        // Different files (the Up filter and run-length codes against the adaptive
+        // filter and level 1), checked to hold the same samples in `display`'s tests.
+        assert_ne!(fast, rle);
+        assert_eq!(
+            OutputFormat::png(16).with_png_compression(PngCompression::Rle),
+            OutputFormat::Png {
+                bits: 16,
+                compression: PngCompression::Rle
+            }
+        );
+        for other in [
+            OutputFormat::Jpeg { quality: 90 },
+            OutputFormat::Exr,
+            OutputFormat::Tiff,
+            OutputFormat::Radiance,
+        ] {
+            assert_eq!(other.with_png_compression(PngCompression::Rle), other);
+        }
+        assert_eq!(
+            OutputFormat::from_path(Path::new("a/b.PNG")).unwrap(),
+            OutputFormat::png(8)
+        );
+    }
 }
