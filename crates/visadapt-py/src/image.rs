@@ -355,7 +355,6 @@ pub fn chart(py: Python<'_>, white: f64, fov: Option<f64>, gratings: bool) -> Py
 ///         display image (`whiteLuminance`); give the one passed to `map`.
 #[pyfunction]
 #[pyo3(signature = (path, data, *, bits = 8, png_compression = "fast", quality = 90, display_max = 80.0))]
-#[allow(clippy::too_many_arguments)]
 pub fn write(
     py: Python<'_>,
     path: PathBuf,
