@@ -1022,14 +1022,12 @@ fn zip_block(data: &[u8], expected_len: usize, out: &mut Vec<u8>) -> Result<()> 
         // longer than the block fails for want of space; a shorter one is counted.
         let inflater = decompressor.get_or_insert_with(libdeflater::Decompressor::new);
         let written = foreign(|| {
-            inflater
-                .zlib_decompress(data, target)
-                .map_err(|e| match e {
-                    libdeflater::DecompressionError::InsufficientSpace => wrong_size(),
-                    libdeflater::DecompressionError::BadData => {
-                        invalid("ZIP-compressed block is malformed")
-                    }
-                })
+            inflater.zlib_decompress(data, target).map_err(|e| match e {
+                libdeflater::DecompressionError::InsufficientSpace => wrong_size(),
+                libdeflater::DecompressionError::BadData => {
+                    invalid("ZIP-compressed block is malformed")
+                }
+            })
         })?;
         if written != expected_len {
             return Err(wrong_size());
