@@ -16,6 +16,40 @@ impl std::fmt::Debug for Samples<'_> {
     }
 }
 
+/// Samples per parallel piece of [`scale_plane`].
+const SCALE_CHUNK: usize = 1 << 16;
+
+/// `v · factor` for every sample of `plane`, a finite product too large for `f32` saturated
+/// at ±`f32::MAX` (NaN and infinite samples, and every product by a non-finite factor,
+/// stay what the multiplication makes them). Without branches, so that it vectorises,
+/// and in pieces on the `rayon` pool: a pass bound by memory, which a `video` run's
+/// decoder made once per frame on one thread (5 % of a `.exr` run's CPU time with
+/// `--scale`).
+fn scale_plane(plane: &mut [f32], factor: f32) {
+    let piece = |piece: &mut [f32]| {
+        if factor.is_finite() {
+            for v in piece {
+                let p = *v * factor;
+                // A finite sample times a finite factor overflows only to ±∞: clamped.
+                *v = if v.abs() <= f32::MAX {
+                    p.clamp(-f32::MAX, f32::MAX)
+                } else {
+                    p
+                };
+            }
+        } else {
+            piece.iter_mut().for_each(|v| *v *= factor);
+        }
+    };
+    #[cfg(feature = "rayon")]
+    {
+        use rayon::prelude::*;
+        plane.par_chunks_mut(SCALE_CHUNK).for_each(piece);
+    }
+    #[cfg(not(feature = "rayon"))]
+    plane.chunks_mut(SCALE_CHUNK).for_each(piece);
+}
+
 /// A high-dynamic-range image in absolute photometric units.
 ///
 /// * `x`, `y`, `z`: CIE 1931 tristimulus values with `y` the photopic luminance in cd/m².
@@ -146,19 +180,11 @@ impl HdrImage {
     /// Finite products too large for f32 saturate at ±`f32::MAX` instead of becoming
     /// infinite (NaN and Inf samples stay what they are).
     pub fn scale(&mut self, factor: f32) {
-        let scale = |v: &mut f32| {
-            let p = *v * factor;
-            *v = if p.is_infinite() && v.is_finite() && factor.is_finite() {
-                f32::MAX.copysign(p)
-            } else {
-                p
-            };
-        };
-        for plane in [&mut self.x, &mut self.y, &mut self.z] {
-            plane.iter_mut().for_each(scale);
-        }
-        if let Some(s) = &mut self.scotopic {
-            s.iter_mut().for_each(scale);
+        let planes = [&mut self.x, &mut self.y, &mut self.z]
+            .into_iter()
+            .chain(self.scotopic.as_mut());
+        for plane in planes {
+            scale_plane(plane, factor);
         }
     }
 
@@ -467,6 +493,72 @@ mod tests {
             shown.len() < 200 && shown.contains("display_max_cd_m2: 100.0"),
             "{shown}"
         );
+    }
+
+    #[test]
+    fn scale_is_the_saturating_product_of_every_sample() {
+        // The rule one sample at a time: the product, or ±MAX where a finite sample times
+        // a finite factor overflowed.
+        let rule = |v: f32, f: f32| {
+            let p = v * f;
+            if p.is_infinite() && v.is_finite() && f.is_finite() {
+                f32::MAX.copysign(p)
+            } else {
+                p
+            }
+        };
+        let specials = [
+            0.0f32,
+            -0.0,
+            1.0,
+            -2.5,
+            f32::MAX,
+            -f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            3e38,
+            -1e30,
+            f32::MIN_POSITIVE,
+            1e-45,
+        ];
+        // Longer than one parallel piece, with the specials spread through it.
+        let n = 3 * SCALE_CHUNK + 17;
+        let plane: Vec<f32> = (0..n)
+            .map(|i| {
+                if i % 101 == 0 {
+                    specials[(i / 101) % specials.len()]
+                } else {
+                    (i as f32 * 0.37).sin() * 1e3
+                }
+            })
+            .collect();
+        for f in [
+            0.0f32,
+            1.0,
+            179.0,
+            1e10,
+            -3.0,
+            1e-40,
+            f32::INFINITY,
+            f32::NAN,
+        ] {
+            let mut image = HdrImage::zeros(n, 1);
+            image.x.clone_from(&plane);
+            image.y.clone_from(&plane);
+            image.z.clone_from(&plane);
+            image.scotopic = Some(plane.clone());
+            image.scale(f);
+            for got in [&image.x, &image.y, &image.z, image.scotopic.as_ref().unwrap()] {
+                for (i, (&g, &v)) in got.iter().zip(&plane).enumerate() {
+                    let want = rule(v, f);
+                    assert!(
+                        g.to_bits() == want.to_bits() || (g.is_nan() && want.is_nan()),
+                        "{v} × {f} at {i}: {g}, not {want}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

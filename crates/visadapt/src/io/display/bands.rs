@@ -223,7 +223,10 @@ impl Scratch {
             #[cfg(feature = "rayon")]
             let (compressed, ()) = rayon::join(compress, filter_next);
             #[cfg(not(feature = "rayon"))]
-            let (compressed, ()) = (compress(), filter_next());
+            let (compressed, ()) = {
+                let (mut compress, mut filter_next) = (compress, filter_next);
+                (compress(), filter_next())
+            };
             compressed.map_err(failed)?;
             std::mem::swap(ready, next);
         }
