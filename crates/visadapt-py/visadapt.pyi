@@ -147,7 +147,7 @@ def write(
     data: Union[HdrImage, Array],
     *,
     bits: int = 8,
-    png_compression: str = "fast",
+    png_compression: Literal["fast", "fastest", "rle", "fdeflate"] = "fast",
     quality: int = 90,
     display_max: float = 80.0,
 ) -> None:
