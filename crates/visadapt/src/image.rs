@@ -549,7 +549,12 @@ mod tests {
             image.z.clone_from(&plane);
             image.scotopic = Some(plane.clone());
             image.scale(f);
-            for got in [&image.x, &image.y, &image.z, image.scotopic.as_ref().unwrap()] {
+            for got in [
+                &image.x,
+                &image.y,
+                &image.z,
+                image.scotopic.as_ref().unwrap(),
+            ] {
                 for (i, (&g, &v)) in got.iter().zip(&plane).enumerate() {
                     let want = rule(v, f);
                     assert!(
