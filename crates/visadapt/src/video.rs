@@ -617,17 +617,32 @@ where
 }
 
 /// Numbered HDR files as a [`Source`]: frame `k` is `paths[k]`, read with
-/// [`io::read_into`] (any format the library reads, detected from its first bytes).
+/// [`io::read_scaled_into`] (any format the library reads, detected from its first
+/// bytes), its values multiplied by [`FileFrames::with_scale`]'s factor.
 #[derive(Debug, Clone)]
 pub struct FileFrames {
     paths: Vec<PathBuf>,
     limits: Limits,
+    scale: f32,
 }
 
 impl FileFrames {
-    /// The frames `paths`, in order, each read within `limits`.
+    /// The frames `paths`, in order, each read within `limits`, in the files' own units.
     pub fn new(paths: Vec<PathBuf>, limits: Limits) -> Self {
-        FileFrames { paths, limits }
+        FileFrames {
+            paths,
+            limits,
+            scale: 1.0,
+        }
+    }
+
+    /// The frames with every value multiplied by `factor` as they are decoded (a unit
+    /// conversion into cd/m², `visadapt video --scale`; see [`io::read_scaled_into`]).
+    pub fn with_scale(self, factor: f32) -> Self {
+        FileFrames {
+            scale: factor,
+            ..self
+        }
     }
 
     /// The frames' paths.
@@ -641,7 +656,7 @@ impl Source<Error> for FileFrames {
         let Some(path) = usize::try_from(index).ok().and_then(|k| self.paths.get(k)) else {
             return Ok(false);
         };
-        io::read_into(path, &self.limits, bytes, image)?;
+        io::read_scaled_into(path, &self.limits, self.scale, bytes, image)?;
         Ok(true)
     }
 }

@@ -99,21 +99,23 @@ fn map_file(
     output: &Path,
     step: &dyn Fn(String),
 ) -> anyhow::Result<Mapped> {
-    let read = if is_std(input) {
-        io::read_from(std::io::stdin().lock(), &args.limits.limits())
+    let hot_pixel_fraction = conditions.hot_pixel_fraction;
+    let (image, scale) = if is_std(input) {
+        let input = &shown(input, "standard input");
+        step(format!("reading {}", input.display()));
+        let mut image = io::read_from(std::io::stdin().lock(), &args.limits.limits())
+            .with_context(|| input.display().to_string())?;
+        let scale = args.units.factor(input, &image, hot_pixel_fraction)?;
+        if scale != 1.0 {
+            image.scale(scale as f32);
+        }
+        (image, scale)
     } else {
-        io::read(input, &args.limits.limits())
+        step(format!("reading {}", input.display()));
+        args.units
+            .read(input, &args.limits.limits(), hot_pixel_fraction)?
     };
     let input = &shown(input, "standard input");
-    step(format!("reading {}", input.display()));
-    let mut image = read.with_context(|| input.display().to_string())?;
-
-    let scale = args
-        .units
-        .factor(input, &image, conditions.hot_pixel_fraction)?;
-    if scale != 1.0 {
-        image.scale(scale as f32);
-    }
     let conditions = ViewingConditions {
         view: args.view.view(image.width, image.height),
         ..conditions.clone()

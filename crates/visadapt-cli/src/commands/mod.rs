@@ -13,11 +13,30 @@ pub mod video;
 pub mod visible;
 
 use crate::cli::UnitsArgs;
-use anyhow::bail;
+use anyhow::{Context, bail};
 use std::path::Path;
-use visadapt::HdrImage;
+use visadapt::{HdrImage, Limits, io};
 
 impl UnitsArgs {
+    /// Read the file at `path` in cd/m², and the factor that took it there
+    /// ([`UnitsArgs::factor`]): `--scale` applied by the decoder in its own conversion pass
+    /// ([`io::read_scaled`]), `--peak` once the image is read.
+    pub fn read(
+        &self,
+        path: &Path,
+        limits: &Limits,
+        hot_pixel_fraction: f64,
+    ) -> anyhow::Result<(HdrImage, f64)> {
+        let decoder_factor = self.scale.unwrap_or(1.0) as f32;
+        let mut image = io::read_scaled(path, limits, decoder_factor)
+            .with_context(|| path.display().to_string())?;
+        let factor = self.factor(path, &image, hot_pixel_fraction)?;
+        if self.scale.is_none() && factor != 1.0 {
+            image.scale(factor as f32);
+        }
+        Ok((image, factor))
+    }
+
     /// The factor that turns an input's values into cd/m²: `--scale S`, or `--peak L` over
     /// its highest visible luminance ([`HdrImage::peak_factor`]), or 1 (with a warning when
     /// the file does not state its units).

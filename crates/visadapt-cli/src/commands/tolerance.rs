@@ -32,14 +32,11 @@ pub fn run(args: ToleranceArgs) -> anyhow::Result<()> {
     };
     conditions.validate()?;
 
-    let mut image = io::read(&args.input, &args.limits.limits())
-        .with_context(|| args.input.display().to_string())?;
-    let scale = args
-        .units
-        .factor(&args.input, &image, conditions.hot_pixel_fraction)?;
-    if scale != 1.0 {
-        image.scale(scale as f32);
-    }
+    let (image, scale) = args.units.read(
+        &args.input,
+        &args.limits.limits(),
+        conditions.hot_pixel_fraction,
+    )?;
     let conditions = ViewingConditions {
         // The view sets the degrees of the glare spread function and of the local
         // adaptation radius.

@@ -261,17 +261,17 @@ pub fn run(args: VideoArgs) -> anyhow::Result<()> {
             let reader = Reader::Files {
                 frames: &frames[..take],
                 limits: &limits,
-                scale,
+                scale: scale.unwrap_or(1.0),
             };
             (&frames[..take], Some(take as u64), reader)
         }
         Source::Stream { width, height } => {
             // The size is checked before anything is read or allocated.
-            let stream = FrameReader::new(std::io::stdin(), STDIN, *width, *height, &limits)?;
+            let stream = FrameReader::new(std::io::stdin(), STDIN, *width, *height, &limits)?
+                .with_scale(scale.unwrap_or(1.0));
             let reader = Reader::Stream {
                 stream: Mutex::new(stream),
                 max_frames: args.max_frames,
-                scale,
             };
             (&[][..], args.max_frames, reader)
         }
@@ -448,23 +448,23 @@ fn describe(t: &video::Timings) -> String {
 }
 
 /// The frames' reader, for [`video::run`]: files (read by several decoder threads) or raw
-/// frames on standard input (read in order). `--scale` is applied as a frame is decoded.
+/// frames on standard input (read in order). `--scale` is applied as a frame is decoded,
+/// in the decoder's own conversion pass.
 enum Reader<'a> {
     Files {
         frames: &'a [(u64, PathBuf)],
         limits: &'a visadapt::Limits,
-        scale: Option<f32>,
+        scale: f32,
     },
     Stream {
         stream: Mutex<FrameReader<std::io::Stdin>>,
         max_frames: Option<u64>,
-        scale: Option<f32>,
     },
 }
 
 impl video::Source<anyhow::Error> for Reader<'_> {
     fn read(&self, k: u64, bytes: &mut Vec<u8>, hdr: &mut HdrImage) -> anyhow::Result<bool> {
-        let scale = match self {
+        match self {
             Reader::Files {
                 frames,
                 limits,
@@ -473,29 +473,18 @@ impl video::Source<anyhow::Error> for Reader<'_> {
                 let Some((n, input)) = usize::try_from(k).ok().and_then(|k| frames.get(k)) else {
                     return Ok(false);
                 };
-                io::read_into(input, limits, bytes, hdr)
+                io::read_scaled_into(input, limits, *scale, bytes, hdr)
                     .with_context(|| format!("frame {n} ({})", input.display()))?;
-                scale
+                Ok(true)
             }
-            Reader::Stream {
-                stream,
-                max_frames,
-                scale,
-            } => {
+            Reader::Stream { stream, max_frames } => {
                 if max_frames.is_some_and(|m| k >= m) {
                     return Ok(false);
                 }
                 let mut stream = stream.lock().unwrap_or_else(|e| e.into_inner());
-                if !stream.read_into(hdr)? {
-                    return Ok(false);
-                }
-                scale
+                Ok(stream.read_into(hdr)?)
             }
-        };
-        if let Some(s) = scale {
-            hdr.scale(*s);
         }
-        Ok(true)
     }
 
     fn in_order(&self) -> bool {

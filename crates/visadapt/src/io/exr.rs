@@ -121,7 +121,7 @@ const CHROMA_FILTER: [f32; 14] = [
 /// Decode an OpenEXR file held in memory (see the [module documentation](self) for the
 /// rules).
 pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
-    decode_checked(bytes, limits, &mut Vec::new())
+    decode_checked(bytes, limits, 1.0, &mut Vec::new())
 }
 
 /// [`decode`] into an existing image, reusing the memory of its planes for the planes
@@ -130,6 +130,26 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
 /// would zero). On success `image` is entirely overwritten; on error its contents are
 /// unspecified (its planes may have been taken).
 pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Result<()> {
+    decode_scaled_into(bytes, limits, 1.0, image)
+}
+
+/// [`decode_into`] with every value multiplied by `factor` (a unit conversion, `--scale`)
+/// in the same pass: the factor joins the `whiteLuminance` scale of the conversion to
+/// XYZ, so the values are rounded to `f32` once, not twice, and saturate as
+/// [`HdrImage::scale`]'s do. Parts stored as XYZ, which are not converted, and factors
+/// that are not finite (whose products with the matrix would not be the products of the
+/// converted values) are applied by [`HdrImage::scale`] after decoding.
+pub(crate) fn decode_scaled_into(
+    bytes: &[u8],
+    limits: &Limits,
+    factor: f32,
+    image: &mut HdrImage,
+) -> Result<()> {
+    if !factor.is_finite() {
+        decode_scaled_into(bytes, limits, 1.0, image)?;
+        image.scale(factor);
+        return Ok(());
+    }
     let mut spare: Vec<Vec<f32>> = [
         image.scotopic.take().unwrap_or_default(),
         std::mem::take(&mut image.z),
@@ -139,7 +159,7 @@ pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Resul
     .into_iter()
     .filter(|p| p.capacity() > 0)
     .collect();
-    *image = decode_checked(bytes, limits, &mut spare)?;
+    *image = decode_checked(bytes, limits, factor, &mut spare)?;
     Ok(())
 }
 
@@ -332,7 +352,12 @@ struct PendingBlock<'a> {
 }
 
 /// Decode, taking the memory of planes from `spare` where it is large enough.
-fn decode_checked(bytes: &[u8], limits: &Limits, spare: &mut Vec<Vec<f32>>) -> Result<HdrImage> {
+fn decode_checked(
+    bytes: &[u8],
+    limits: &Limits,
+    factor: f32,
+    spare: &mut Vec<Vec<f32>>,
+) -> Result<HdrImage> {
     let mut cursor = Cursor::new(bytes);
     let meta = foreign(|| MetaData::read_from_buffered(&mut cursor, false).map_err(exr_error))?;
     // The header reader consumes exactly the headers (it only peeks at the terminating
@@ -396,9 +421,15 @@ fn decode_checked(bytes: &[u8], limits: &Limits, spare: &mut Vec<Vec<f32>>) -> R
     };
 
     let pending = collect_blocks(bytes, &meta, tables_start, index)?;
-    let planes = decompress_and_scatter(header, &layout, &pending, &budget, spare)?;
+    // The factor joins the conversion's scale; XYZ parts are not converted.
+    let factor = f64::from(factor);
+    let planes = decompress_and_scatter(header, &layout, &pending, &budget, factor, spare)?;
     debug_assert_eq!(planes.planes.first().map(Vec::len), Some(n));
-    to_hdr(header, &layout, planes, width, height)
+    let mut image = to_hdr(header, &layout, planes, factor, width, height)?;
+    if matches!(layout, Layout::Xyz { .. }) && factor != 1.0 {
+        image.scale(factor as f32);
+    }
+    Ok(image)
 }
 
 /// Check the selected part's header with the `exr` crate's (non-strict) validation, and
@@ -714,7 +745,8 @@ fn white_scale(header: &Header) -> f64 {
 }
 
 /// Decompress every block and copy the samples of the layout's channels into planes (one
-/// per channel of [`Layout::channels`], each at the channel's own resolution).
+/// per channel of [`Layout::channels`], each at the channel's own resolution). RGB
+/// converted to XYZ on the way is multiplied by `factor` as well as `whiteLuminance`.
 ///
 /// Scan-line parts (every block the full width, the common case of rendered frames) are
 /// decompressed and copied out in parallel, block by block, each block's rows straight
@@ -727,6 +759,7 @@ fn decompress_and_scatter(
     layout: &Layout,
     pending: &[PendingBlock<'_>],
     budget: &Budget<'_>,
+    factor: f64,
     spare: &mut Vec<Vec<f32>>,
 ) -> Result<Planes> {
     let used = layout.channels();
@@ -847,7 +880,7 @@ fn decompress_and_scatter(
         } if !subsampled => file_matrix(header).ok(),
         _ => None,
     };
-    let scale = white_scale(header);
+    let scale = white_scale(header) * factor;
     let fill = |block: &PendingBlock<'_>,
                 data: &[u8],
                 dst: &mut [&mut [f32]],
@@ -1317,11 +1350,13 @@ fn rgb_to_xyz_kernel(m: &Mat3, scale: f64, r: &mut [f32], g: &mut [f32], b: &mut
     }
 }
 
-/// Build the [`HdrImage`] from the planes of `layout`.
+/// Build the [`HdrImage`] from the planes of `layout`, the values converted to XYZ times
+/// `factor` (XYZ planes are taken as they are).
 fn to_hdr(
     header: &Header,
     layout: &Layout,
     planes: Planes,
+    factor: f64,
     width: usize,
     height: usize,
 ) -> Result<HdrImage> {
@@ -1331,7 +1366,7 @@ fn to_hdr(
         .own_attributes
         .white_luminance
         .filter(|v| v.is_finite() && *v > 0.0);
-    let scale = white_scale(header);
+    let scale = white_scale(header) * factor;
     let mut image = HdrImage {
         width,
         height,

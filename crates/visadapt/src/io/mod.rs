@@ -61,9 +61,14 @@ pub const HEAD_LEN: usize = 1 << 20;
 /// Read an HDR image from a file, whatever its format (see [`read_bytes`] for what is
 /// read).
 pub fn read(path: &Path, limits: &Limits) -> Result<HdrImage> {
-    let mut bytes = Vec::new();
-    read_bytes(path, limits, &mut bytes)?;
-    decode(&bytes, limits)
+    read_scaled(path, limits, 1.0)
+}
+
+/// [`read`] with every value multiplied by `factor` (see [`read_scaled_into`]).
+pub fn read_scaled(path: &Path, limits: &Limits, factor: f32) -> Result<HdrImage> {
+    let mut image = HdrImage::zeros(0, 0);
+    read_scaled_into(path, limits, factor, &mut Vec::new(), &mut image)?;
+    Ok(image)
 }
 
 /// [`read`] into existing buffers, reusing their memory (for a sequence of frames):
@@ -75,11 +80,45 @@ pub fn read_into(
     bytes: &mut Vec<u8>,
     image: &mut HdrImage,
 ) -> Result<()> {
+    read_scaled_into(path, limits, 1.0, bytes, image)
+}
+
+/// [`read_into`] with every value multiplied by `factor`, as [`HdrImage::scale`] would
+/// after it (a unit conversion: `--scale`), but for Radiance and OpenEXR files in the
+/// decoder's own conversion pass, which saves a pass over the planes: the factor joins
+/// the matrix from the file's channels to XYZ, so each value is rounded to `f32` once
+/// instead of twice (the two ways agree within about one unit in the last place) and
+/// saturates at ±`f32::MAX` as [`HdrImage::scale`]'s products do. Other formats, and
+/// factors a decoder's matrix cannot take (not finite, or far beyond any unit
+/// conversion), are scaled after decoding.
+///
+/// ```
+/// use visadapt::{HdrImage, Limits, io};
+/// let mut scene = HdrImage::zeros(4, 2);
+/// scene.y.fill(0.5);
+/// let path = std::env::temp_dir().join("visadapt-doc-read-scaled.exr");
+/// io::exr::write_hdr(&scene, std::fs::File::create(&path)?)?;
+/// let (mut bytes, mut image) = (Vec::new(), HdrImage::zeros(0, 0));
+/// io::read_scaled_into(&path, &Limits::default(), 179.0, &mut bytes, &mut image)?;
+/// assert!((image.y[0] - 89.5).abs() < 1e-4);
+/// # std::fs::remove_file(&path)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn read_scaled_into(
+    path: &Path,
+    limits: &Limits,
+    factor: f32,
+    bytes: &mut Vec<u8>,
+    image: &mut HdrImage,
+) -> Result<()> {
     match read_bytes(path, limits, bytes)? {
-        InputFormat::Radiance => radiance::decode_into(bytes, limits, image),
-        InputFormat::OpenExr => exr::decode_into(bytes, limits, image),
+        InputFormat::Radiance => radiance::decode_scaled_into(bytes, limits, factor, image),
+        InputFormat::OpenExr => exr::decode_scaled_into(bytes, limits, factor, image),
         _ => {
             *image = decode(bytes, limits)?;
+            if factor != 1.0 {
+                image.scale(factor);
+            }
             Ok(())
         }
     }

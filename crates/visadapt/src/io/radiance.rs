@@ -129,11 +129,32 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
 /// `scotopic = None`, `absolute_units = true`, `adopted_white` = the white of the
 /// `PRIMARIES=`, E by default); on error its contents are unspecified.
 pub fn decode_into(bytes: &[u8], limits: &Limits, image: &mut HdrImage) -> Result<()> {
-    decode_with(bytes, limits, image, true)
+    decode_with(bytes, limits, 1.0, image, true)
 }
 
-/// [`decode_into`], with the parallel decoder allowed or not (the tests compare the two).
-fn decode_with(bytes: &[u8], limits: &Limits, image: &mut HdrImage, parallel: bool) -> Result<()> {
+/// [`decode_into`] with every value multiplied by `factor` (a unit conversion, `--scale`)
+/// in the same pass: the factor joins the conversion matrix, so the values are rounded to
+/// `f32` once, not twice, and saturate as [`HdrImage::scale`]'s do. A factor the matrix
+/// cannot take (one that is not finite, or that puts an entry beyond the matrix's bound)
+/// is applied by [`HdrImage::scale`] after decoding.
+pub(crate) fn decode_scaled_into(
+    bytes: &[u8],
+    limits: &Limits,
+    factor: f32,
+    image: &mut HdrImage,
+) -> Result<()> {
+    decode_with(bytes, limits, factor, image, true)
+}
+
+/// [`decode_scaled_into`], with the parallel decoder allowed or not (the tests compare the
+/// two).
+fn decode_with(
+    bytes: &[u8],
+    limits: &Limits,
+    factor: f32,
+    image: &mut HdrImage,
+    parallel: bool,
+) -> Result<()> {
     let (header, after_header) = parse_header(bytes)?;
     let (res, data_start) = parse_resolution(bytes, after_header)?;
     let n = limits.check(FORMAT, res.width, res.height)?;
@@ -150,7 +171,17 @@ fn decode_with(bytes: &[u8], limits: &Limits, image: &mut HdrImage, parallel: bo
     if data.len() / 4 < scan_count {
         return Err(truncated());
     }
-    let conv = Converter::new(&header)?;
+    // The factor in the matrix, or (when the matrix cannot take it) after decoding.
+    let (conv, after) = match Converter::new(&header, factor) {
+        Ok(conv) => (conv, 1.0),
+        Err(_) if factor != 1.0 => (Converter::new(&header, 1.0)?, factor),
+        Err(e) => return Err(e),
+    };
+    let scaled = |image: &mut HdrImage| {
+        if after != 1.0 {
+            image.scale(after);
+        }
+    };
 
     for plane in [&mut image.x, &mut image.y, &mut image.z] {
         if plane.capacity() >= n {
@@ -187,7 +218,9 @@ fn decode_with(bytes: &[u8], limits: &Limits, image: &mut HdrImage, parallel: bo
             x_decreasing: res.x_decreasing,
             conv: &conv,
         };
-        return rows.decode_parallel(x, y, z);
+        rows.decode_parallel(x, y, z)?;
+        scaled(image);
+        return Ok(());
     }
     #[cfg(not(feature = "rayon"))]
     let _ = parallel;
@@ -237,6 +270,7 @@ fn decode_with(bytes: &[u8], limits: &Limits, image: &mut HdrImage, parallel: bo
             }
         }
     }
+    scaled(image);
     Ok(())
 }
 
@@ -835,7 +869,9 @@ const F32_PATH_MIN: f64 = 1e-20;
 const F32_PATH_MAX: f64 = 1e20;
 
 impl Converter {
-    fn new(h: &Header) -> Result<Self> {
+    /// The converter of `h`'s pixels, each value multiplied by `factor` (1 for the file's
+    /// own cd/m²).
+    fn new(h: &Header, factor: f32) -> Result<Self> {
         let (base, k) = match h.format {
             PixelFormat::Rgbe => (h.rgb_to_xyz, WHITE_EFFICACY / h.exposure),
             PixelFormat::Xyze => (
@@ -843,6 +879,7 @@ impl Converter {
                 1.0 / h.exposure,
             ),
         };
+        let k = k * f64::from(factor);
         let mut m = [[0.0; 3]; 3];
         for (row, base_row) in m.iter_mut().zip(base) {
             for ((v, b), cc) in row.iter_mut().zip(base_row).zip(h.colorcorr) {
@@ -1102,7 +1139,7 @@ mod tests {
             "#?RADIANCE\nFORMAT=32-bit_rle_xyze\n\n-Y 1 +X 1\n",
         ] {
             let (header, _) = parse_header(header_text.as_bytes()).unwrap();
-            let conv = Converter::new(&header).unwrap();
+            let conv = Converter::new(&header, 1.0).unwrap();
             for tiny in [false, true] {
                 let len = 1000;
                 let mut scan: Vec<u8> = (0..4 * len).map(|_| next() as u8).collect();
@@ -1939,7 +1976,7 @@ mod tests {
     fn serial_and_parallel(bytes: &[u8]) -> Result<HdrImage> {
         let run = |parallel| {
             let mut image = HdrImage::zeros(0, 0);
-            decode_with(bytes, &Limits::default(), &mut image, parallel).map(|()| image)
+            decode_with(bytes, &Limits::default(), 1.0, &mut image, parallel).map(|()| image)
         };
         let (serial, parallel) = (run(false), run(true));
         match (&serial, &parallel) {

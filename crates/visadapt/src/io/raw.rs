@@ -58,6 +58,8 @@ pub struct FrameReader<R> {
     frames: u64,
     /// One plane's bytes.
     bytes: Vec<u8>,
+    /// The factor every value is multiplied by ([`FrameReader::with_scale`]).
+    scale: f32,
 }
 
 impl<R: Read> FrameReader<R> {
@@ -84,7 +86,19 @@ impl<R: Read> FrameReader<R> {
             height: height as usize,
             frames: 0,
             bytes: Vec::new(),
+            scale: 1.0,
         })
+    }
+
+    /// The reader with every value multiplied by `factor` (the frames' unit in cd/m²,
+    /// `visadapt video --scale`) in the conversion to XYZ, as [`HdrImage::scale`] would
+    /// after it, with one rounding instead of two (a factor that is not finite is
+    /// applied by [`HdrImage::scale`]).
+    pub fn with_scale(self, factor: f32) -> Self {
+        FrameReader {
+            scale: factor,
+            ..self
+        }
     }
 
     /// Frames read so far.
@@ -134,7 +148,16 @@ impl<R: Read> FrameReader<R> {
             return Ok(false);
         }
         let m = REC709.rgb_to_xyz().expect("Rec.709 primaries are valid");
-        colour::rgb_planes_to_xyz(&m, 1.0, &mut image.x, &mut image.y, &mut image.z);
+        let fused = if self.scale.is_finite() {
+            self.scale
+        } else {
+            1.0
+        };
+        let (x, y, z) = (&mut image.x, &mut image.y, &mut image.z);
+        colour::rgb_planes_to_xyz(&m, f64::from(fused), x, y, z);
+        if fused != self.scale {
+            image.scale(self.scale);
+        }
         self.frames += 1;
         Ok(true)
     }
