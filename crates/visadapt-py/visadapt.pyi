@@ -105,7 +105,11 @@ class HdrImage:
         """True when the values are known to be cd/m²."""
 
 def read(
-    path: Path, max_pixels: Optional[int] = None, max_memory_bytes: Optional[int] = None
+    path: Path,
+    max_pixels: Optional[int] = None,
+    max_memory_bytes: Optional[int] = None,
+    *,
+    scale: Optional[float] = None,
 ) -> HdrImage:
     """Read a Radiance, OpenEXR or PFM file, or an 8/16-bit PNG, JPEG or TIFF photograph
     (format from its first bytes).

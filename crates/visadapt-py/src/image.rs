@@ -180,6 +180,10 @@ fn wrap(inner: visadapt::HdrImage) -> PyResult<HdrImage> {
 ///     max_pixels: refuse images larger than this many pixels (default 2**28), before
 ///         anything is allocated.
 ///     max_memory_bytes: memory budget for reading, bytes (default 12 GiB).
+///     scale: multiply every value by this (keyword only; the file's unit in cd/m², e.g.
+///         179 for Radiance-style radiance in W/sr/m²), as `map(image, scale=...)` would,
+///         but applied by the decoder as it converts (no pass of its own for Radiance and
+///         OpenEXR files). `absolute_units` stays what the file says.
 ///
 /// Returns:
 ///     HdrImage: XYZ in cd/m² (see `HdrImage.absolute_units` for files without units).
@@ -188,22 +192,32 @@ fn wrap(inner: visadapt::HdrImage) -> PyResult<HdrImage> {
 ///     OSError: the file cannot be read.
 ///     DecodeError: the file is corrupt or truncated (UnsupportedError: a format or feature
 ///         visadapt does not read).
-///     ValueError: the image exceeds `max_pixels` or `max_memory_bytes`.
+///     ValueError: the image exceeds `max_pixels` or `max_memory_bytes`, or `scale` is
+///         not a positive finite number.
 #[pyfunction]
-#[pyo3(signature = (path, max_pixels = None, max_memory_bytes = None))]
+#[pyo3(signature = (path, max_pixels = None, max_memory_bytes = None, *, scale = None))]
 pub fn read(
     py: Python<'_>,
     path: PathBuf,
     max_pixels: Option<u64>,
     max_memory_bytes: Option<u64>,
+    scale: Option<f64>,
 ) -> PyResult<HdrImage> {
+    let factor = match scale {
+        None => 1.0,
+        Some(s) if s.is_finite() && s > 0.0 && (s as f32).is_finite() => s as f32,
+        Some(s) => {
+            let e = visadapt::Error::invalid("scale", s, "must be a positive, finite number");
+            return Err(to_py(e, Some(&path)));
+        }
+    };
     let defaults = Limits::default();
     let limits = Limits {
         max_pixels: max_pixels.unwrap_or(defaults.max_pixels),
         max_memory_bytes: max_memory_bytes.unwrap_or(defaults.max_memory_bytes),
     };
     let image = detached(py, || {
-        io::read(&path, &limits).map_err(|e| to_py(e, Some(&path)))
+        io::read_scaled(&path, &limits, factor).map_err(|e| to_py(e, Some(&path)))
     })?;
     wrap(image)
 }

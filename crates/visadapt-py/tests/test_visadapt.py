@@ -533,3 +533,18 @@ def test_read_takes_photographs_in_relative_units_stated_with_scale(tmp_path):
     _, unscaled = visadapt.map(photo)
     ratio = report["highest_visible_cd_m2"] / unscaled["highest_visible_cd_m2"]
     assert abs(ratio - 0.05) < 1e-6 * 0.05
+
+
+def test_read_with_scale_is_read_then_scaled(tmp_path):
+    # The factor is applied by the decoder as it converts (one rounding to float32 where
+    # reading and multiplying make two): the same values within 2**-20 of each.
+    display, _ = visadapt.map(visadapt.chart(white=50))
+    visadapt.write(tmp_path / "scene.exr", display)
+    for path in (DATA / "mixtex.hdr", DATA / "GrayRampsHorizontal.exr", tmp_path / "scene.exr"):
+        plain = visadapt.read(path)
+        scaled = visadapt.read(path, scale=179.0)
+        assert scaled.absolute_units == plain.absolute_units
+        np.testing.assert_allclose(scaled.xyz, plain.xyz * np.float32(179), rtol=2**-20, atol=0)
+    for bad in (0.0, -2.0, float("nan"), float("inf"), 1e300):
+        with pytest.raises(ValueError, match=r"invalid scale .*: must be a positive, finite number"):
+            visadapt.read(DATA / "mixtex.hdr", scale=bad)

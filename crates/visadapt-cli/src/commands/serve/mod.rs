@@ -9,7 +9,6 @@ mod viewer;
 use crate::cli::ServeArgs;
 use anyhow::Context;
 use std::sync::{Arc, Mutex};
-use visadapt::io;
 
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     // The page switches glare and local adaptation on and off; the flags set how it
@@ -32,14 +31,11 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     );
     conditions.validate()?;
 
-    let mut image = io::read(&args.input, &args.limits.limits())
-        .with_context(|| args.input.display().to_string())?;
-    let scale = args
-        .units
-        .factor(&args.input, &image, conditions.hot_pixel_fraction)?;
-    if scale != 1.0 {
-        image.scale(scale as f32);
-    }
+    let (image, scale) = args.units.read(
+        &args.input,
+        &args.limits.limits(),
+        conditions.hot_pixel_fraction,
+    )?;
     let (width, height) = (image.width, image.height);
     let defaults = viewer::Defaults {
         display_max_cd_m2: conditions.display_max_cd_m2,
