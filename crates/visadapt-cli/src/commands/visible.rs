@@ -31,7 +31,11 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
     conditions.validate()?;
 
     let limits = args.limits.limits();
-    let read = |path: &Path| io::read(path, &limits).with_context(|| path.display().to_string());
+    // `--scale` is applied by the decoders; `--peak` once the reference is read.
+    let decoder_factor = args.units.scale.unwrap_or(1.0) as f32;
+    let read = |path: &Path| {
+        io::read_scaled(path, &limits, decoder_factor).with_context(|| path.display().to_string())
+    };
     let mut reference = read(&args.reference)?;
     let mut test = read(&args.test)?;
     if (reference.width, reference.height) != (test.width, test.height) {
@@ -46,7 +50,7 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
         );
     }
     let scale = input_scale(&args, &reference, &test, conditions.hot_pixel_fraction)?;
-    if scale != 1.0 {
+    if args.units.scale.is_none() && scale != 1.0 {
         reference.scale(scale as f32);
         test.scale(scale as f32);
     }
