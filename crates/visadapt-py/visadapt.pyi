@@ -118,9 +118,13 @@ def read(
     code-value white at Y = 1 (relative units): state its luminance in cd/m² with
     `map(image, scale=...)` or `peak=`.
 
+    scale= multiplies every value by the file's unit in cd/m² (e.g. 179 for radiance in
+    W/sr/m²) as `map(image, scale=...)` would, applied by the decoder as it converts;
+    `absolute_units` stays what the file says.
+
     Raises OSError (unreadable), DecodeError (corrupt), UnsupportedError (unknown format or
     feature), ValueError (larger than max_pixels, default 2**28, or than the memory budget
-    max_memory_bytes, default 12 GiB).
+    max_memory_bytes, default 12 GiB; a scale that is not positive and finite).
     """
 
 def from_array(
