@@ -2,8 +2,8 @@
 //! decoder's own pass) against reading and then [`HdrImage::scale`], on every path of the
 //! decoders: Radiance RGBE (single- and double-precision conversion), OpenEXR RGB half and
 //! float blocks with and without `whiteLuminance`, luminance-only and lone-channel grey,
-//! luminance/chroma, XYZ parts (scaled after decoding), PFM (scaled after decoding), and
-//! raw `gbrpf32le` frames.
+//! luminance/chroma, XYZ parts (scaled after decoding), PFM, and raw `gbrpf32le` frames
+//! (which give the same values as a PFM file of the same samples).
 
 mod common;
 
@@ -193,4 +193,53 @@ fn raw_frames_read_scaled_agree_with_scaling_after() {
         }
         assert!(!scaled.read_into(&mut b).unwrap());
     }
+}
+
+/// A PFM file and a raw frame of the same samples, read with the same factor, give the same
+/// values bit for bit (the CLI's `map` of a PFM and `video` of a raw stream rely on it).
+#[test]
+fn pfm_and_raw_frames_of_the_same_samples_read_scaled_alike() {
+    let (width, height) = (6usize, 4usize);
+    let rgb = |x: usize, y: usize| {
+        let t = (x * 31 + y * 17) as f32;
+        [
+            (t * 0.37).sin().abs() * 3.0,
+            (t * 0.11).cos().abs(),
+            t * 0.013,
+        ]
+    };
+    // PFM: interleaved RGB, bottom row first, little-endian (negative scale).
+    let mut pfm = format!("PF\n{width} {height}\n-1.0\n").into_bytes();
+    for y in (0..height).rev() {
+        for x in 0..width {
+            for v in rgb(x, y) {
+                pfm.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    // Raw gbrpf32le: the G, B and R planes, top row first.
+    let mut raw = Vec::new();
+    for channel in [1, 2, 0] {
+        for y in 0..height {
+            for x in 0..width {
+                raw.extend_from_slice(&rgb(x, y)[channel].to_le_bytes());
+            }
+        }
+    }
+    let path = temp("same.pfm");
+    std::fs::write(&path, &pfm).unwrap();
+    let limits = Limits::default();
+    for factor in [1.0, 179.0, 0.01] {
+        let file = io::read_scaled(&path, &limits, factor).unwrap();
+        let mut frames = FrameReader::new(raw.as_slice(), "s", 6, 4, &limits)
+            .unwrap()
+            .with_scale(factor);
+        let mut frame = HdrImage::zeros(0, 0);
+        assert!(frames.read_into(&mut frame).unwrap());
+        for (a, b) in planes(&file).into_iter().zip(planes(&frame)) {
+            let bits = |p: &[f32]| p.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(a), bits(b), "factor {factor}");
+        }
+    }
+    std::fs::remove_file(&path).unwrap();
 }

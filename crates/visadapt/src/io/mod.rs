@@ -84,13 +84,13 @@ pub fn read_into(
 }
 
 /// [`read_into`] with every value multiplied by `factor`, as [`HdrImage::scale`] would
-/// after it (a unit conversion: `--scale`), but for Radiance and OpenEXR files in the
-/// decoder's own conversion pass, which saves a pass over the planes: the factor joins
-/// the matrix from the file's channels to XYZ, so each value is rounded to `f32` once
-/// instead of twice (the two ways agree within about one unit in the last place) and
-/// saturates at ±`f32::MAX` as [`HdrImage::scale`]'s products do. Other formats, and
-/// factors a decoder's matrix cannot take (not finite, or far beyond any unit
-/// conversion), are scaled after decoding.
+/// after it (a unit conversion: `--scale`), but for Radiance, OpenEXR and PFM files in
+/// the decoder's own conversion pass, which saves a pass over the planes: the factor
+/// joins the matrix from the file's channels to XYZ, so each value is rounded to `f32`
+/// once instead of twice (the two ways agree within about one unit in the last place)
+/// and saturates at ±`f32::MAX` as [`HdrImage::scale`]'s products do. Photographs,
+/// OpenEXR XYZ parts, and factors a decoder's matrix cannot take (not finite, or far
+/// beyond any unit conversion) are scaled after decoding.
 ///
 /// ```
 /// use visadapt::{HdrImage, Limits, io};
@@ -114,6 +114,10 @@ pub fn read_scaled_into(
     match read_bytes(path, limits, bytes)? {
         InputFormat::Radiance => radiance::decode_scaled_into(bytes, limits, factor, image),
         InputFormat::OpenExr => exr::decode_scaled_into(bytes, limits, factor, image),
+        InputFormat::Pfm => {
+            *image = pfm::decode_scaled(bytes, limits, factor)?;
+            Ok(())
+        }
         _ => {
             *image = decode(bytes, limits)?;
             if factor != 1.0 {

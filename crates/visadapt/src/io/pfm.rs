@@ -99,6 +99,21 @@ pub(crate) fn file_len(head: &[u8]) -> Option<u64> {
 
 /// Decode a PFM file held in memory (see the [module documentation](self)).
 pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
+    decode_scaled(bytes, limits, 1.0)
+}
+
+/// [`decode`] with every value multiplied by `factor` (`--scale`) in the conversion to
+/// XYZ: the factor joins the Rec. 709 matrix (as in the raw frame reader, so that a PFM
+/// file and a raw frame of the same samples give the same values), one rounding to `f32`
+/// where scaling after decoding made two. A factor that is not finite is applied by
+/// [`HdrImage::scale`] after decoding.
+pub(crate) fn decode_scaled(bytes: &[u8], limits: &Limits, factor: f32) -> Result<HdrImage> {
+    if !factor.is_finite() {
+        let mut image = decode_scaled(bytes, limits, 1.0)?;
+        image.scale(factor);
+        return Ok(image);
+    }
+    let scaled = f64::from(factor);
     let (channels, width, height, scale, pos) = parse_header(bytes)?;
     let n = limits.check(FORMAT, width, height)?;
     let (w, h) = (width as usize, height as usize);
@@ -127,7 +142,10 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
         f64::from(v) * factor
     };
 
-    let m = REC709.rgb_to_xyz().expect("Rec.709 primaries are valid");
+    let m = REC709
+        .rgb_to_xyz()
+        .expect("Rec.709 primaries are valid")
+        .map(|row| row.map(|v| v * scaled));
     let mut image = HdrImage::zeros(w, h);
     image.adopted_white = Some(REC709.white);
     for file_row in 0..h {
@@ -143,7 +161,11 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<HdrImage> {
             };
             let xyz = colour::mul_vec(&m, rgb);
             image.x[o] = saturating_f32(xyz[0]);
-            image.y[o] = saturating_f32(if channels == 1 { rgb[0] } else { xyz[1] });
+            image.y[o] = saturating_f32(if channels == 1 {
+                rgb[0] * scaled
+            } else {
+                xyz[1]
+            });
             image.z[o] = saturating_f32(xyz[2]);
         }
     }
