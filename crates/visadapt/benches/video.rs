@@ -15,6 +15,13 @@
 //! The sequence is 8 frames: a textured scene at 500 cd/m² that drops to 5 cd/m² at the
 //! fourth frame, so that the adaptation state changes from frame to frame.
 //!
+//! The bench installs the allocator the `visadapt` binary installs
+//! ([`visadapt::pages::HugePages`]), so that each iteration runs on the planes the one
+//! before freed, as a long video runs on the planes of its earlier frames. Before it was
+//! installed here, every iteration's planes were fresh pages that the kernel cleared,
+//! about 160 MiB per 8 frames: the figures rose 1.28–1.38× when it was, with no change
+//! to the pipeline (docs/performance-log.md).
+//!
 //! `cargo bench -p visadapt --bench video -- --warm-up-time 1 --measurement-time 8`
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
@@ -24,6 +31,11 @@ use visadapt::io::display::PngCompression;
 use visadapt::operator::ViewingConditions;
 use visadapt::video::{self, FileFrames, FileSink, Observer, Threads};
 use visadapt::{DisplayImage, HdrImage, Limits, View};
+
+/// The allocator `visadapt video` installs, so that the pipeline's planes are reused from
+/// one iteration to the next as they are from frame to frame.
+#[global_allocator]
+static ALLOCATOR: visadapt::pages::HugePages = visadapt::pages::HugePages;
 
 const WIDTH: usize = 1920;
 const HEIGHT: usize = 1080;
