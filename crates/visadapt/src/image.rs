@@ -22,9 +22,10 @@ const SCALE_CHUNK: usize = 1 << 16;
 /// `v · factor` for every sample of `plane`, a finite product too large for `f32` saturated
 /// at ±`f32::MAX` (NaN and infinite samples, and every product by a non-finite factor,
 /// stay what the multiplication makes them). Without branches, so that it vectorises,
-/// and in pieces on the `rayon` pool: a pass bound by memory, which a `video` run's
-/// decoder made once per frame on one thread (5 % of a `.exr` run's CPU time with
-/// `--scale`).
+/// and in pieces on the `rayon` pool: a pass bound by memory. A `video` run's decoder
+/// once made it for every frame (5 % of a `.exr` run's CPU time with `--scale`); the
+/// decoders now fold such a factor into their conversion (`io::read_scaled_into`), and
+/// this pass serves `--peak`, images already in memory, and inputs without a conversion.
 fn scale_plane(plane: &mut [f32], factor: f32) {
     let piece = |piece: &mut [f32]| {
         if factor.is_finite() {
