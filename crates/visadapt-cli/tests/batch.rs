@@ -193,6 +193,57 @@ fn image_size(path: &Path) -> (u32, u32) {
     (p.width, p.height)
 }
 
+/// `map - --scale S` reads standard input with the factor in the decoder's conversion, as
+/// `map FILE --scale S` does: the same file, byte for byte (it was scaled after decoding,
+/// rounding each value twice; the OpenEXR output shows the last bits that differed).
+#[test]
+fn standard_input_is_scaled_as_a_file_is() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (256, 64);
+    let n = w * h;
+    let v = |k: usize, i: usize| ((i * 7919 + k * 104_729) % 1000) as f32 / 1000.0;
+    let picture = visadapt::DisplayImage {
+        width: w,
+        height: h,
+        r: (0..n).map(|i| v(0, i)).collect(),
+        g: (0..n).map(|i| v(1, i)).collect(),
+        b: (0..n).map(|i| v(2, i)).collect(),
+        display_max_cd_m2: 1.0,
+    };
+    let hdr = dir.path().join("scene.hdr");
+    let mut bytes = Vec::new();
+    visadapt::io::radiance::write_display(&picture, &mut bytes).unwrap();
+    std::fs::write(&hdr, &bytes).unwrap();
+    let exr = dir.path().join("scene.exr");
+    let file = std::fs::File::create(&exr).unwrap();
+    visadapt::io::exr::write_display(&picture, std::io::BufWriter::new(file)).unwrap();
+    for input in [hdr, exr] {
+        let by_file = dir.path().join("by-file.exr");
+        succeed(
+            visadapt()
+                .arg("map")
+                .arg(&input)
+                .args(["--scale", "179", "-o"])
+                .arg(&by_file),
+        );
+        let out = visadapt()
+            .args(["map", "-", "--scale", "179", "--format", "exr", "-o", "-"])
+            .write_stdin(std::fs::read(&input).unwrap())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            out.stdout == std::fs::read(&by_file).unwrap(),
+            "{}",
+            input.display()
+        );
+    }
+}
+
 #[test]
 fn a_pipe_reads_standard_input_and_writes_standard_output_with_the_report_on_stderr() {
     let dir = tempfile::tempdir().unwrap();

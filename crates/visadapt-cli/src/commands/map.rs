@@ -103,12 +103,15 @@ fn map_file(
     let (image, scale) = if is_std(input) {
         let input = &shown(input, "standard input");
         step(format!("reading {}", input.display()));
-        let mut image = io::read_from(std::io::stdin().lock(), &args.limits.limits())
-            .with_context(|| input.display().to_string())?;
+        let limits = args.limits.limits();
+        let mut image = io::read_scaled_from(
+            std::io::stdin().lock(),
+            &limits,
+            args.units.decoder_factor(),
+        )
+        .with_context(|| input.display().to_string())?;
         let scale = args.units.factor(input, &image, hot_pixel_fraction)?;
-        if scale != 1.0 {
-            image.scale(scale as f32);
-        }
+        args.units.apply(&mut image, scale);
         (image, scale)
     } else {
         step(format!("reading {}", input.display()));

@@ -27,14 +27,26 @@ impl UnitsArgs {
         limits: &Limits,
         hot_pixel_fraction: f64,
     ) -> anyhow::Result<(HdrImage, f64)> {
-        let decoder_factor = self.scale.unwrap_or(1.0) as f32;
-        let mut image = io::read_scaled(path, limits, decoder_factor)
+        let mut image = io::read_scaled(path, limits, self.decoder_factor())
             .with_context(|| path.display().to_string())?;
         let factor = self.factor(path, &image, hot_pixel_fraction)?;
+        self.apply(&mut image, factor);
+        Ok((image, factor))
+    }
+
+    /// The factor for a decoder to apply in its conversion ([`io::read_scaled`]):
+    /// `--scale`, or 1.
+    pub fn decoder_factor(&self) -> f32 {
+        self.scale.unwrap_or(1.0) as f32
+    }
+
+    /// `image`, read with [`UnitsArgs::decoder_factor`], brought into cd/m² by `factor`
+    /// ([`UnitsArgs::factor`]): with `--scale` the decoder did it, with `--peak` it is
+    /// done here.
+    pub fn apply(&self, image: &mut HdrImage, factor: f64) {
         if self.scale.is_none() && factor != 1.0 {
             image.scale(factor as f32);
         }
-        Ok((image, factor))
     }
 
     /// The factor that turns an input's values into cd/m²: `--scale S`, or `--peak L` over

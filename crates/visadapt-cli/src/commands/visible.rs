@@ -32,9 +32,9 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
 
     let limits = args.limits.limits();
     // `--scale` is applied by the decoders; `--peak` once the reference is read.
-    let decoder_factor = args.units.scale.unwrap_or(1.0) as f32;
     let read = |path: &Path| {
-        io::read_scaled(path, &limits, decoder_factor).with_context(|| path.display().to_string())
+        io::read_scaled(path, &limits, args.units.decoder_factor())
+            .with_context(|| path.display().to_string())
     };
     let mut reference = read(&args.reference)?;
     let mut test = read(&args.test)?;
@@ -50,10 +50,8 @@ pub fn run(args: VisibleArgs) -> anyhow::Result<()> {
         );
     }
     let scale = input_scale(&args, &reference, &test, conditions.hot_pixel_fraction)?;
-    if args.units.scale.is_none() && scale != 1.0 {
-        reference.scale(scale as f32);
-        test.scale(scale as f32);
-    }
+    args.units.apply(&mut reference, scale);
+    args.units.apply(&mut test, scale);
     let conditions = ViewingConditions {
         view: args.view.view(reference.width, reference.height),
         ..conditions

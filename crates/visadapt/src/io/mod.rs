@@ -111,7 +111,21 @@ pub fn read_scaled_into(
     bytes: &mut Vec<u8>,
     image: &mut HdrImage,
 ) -> Result<()> {
-    match read_bytes(path, limits, bytes)? {
+    let format = read_bytes(path, limits, bytes)?;
+    decode_scaled_into(format, bytes, limits, factor, image)
+}
+
+/// The image of `bytes` (a file of `format`) with every value multiplied by `factor`,
+/// into `image`: the decoders' own conversion where they have one (see
+/// [`read_scaled_into`]).
+fn decode_scaled_into(
+    format: InputFormat,
+    bytes: &[u8],
+    limits: &Limits,
+    factor: f32,
+    image: &mut HdrImage,
+) -> Result<()> {
+    match format {
         InputFormat::Radiance => radiance::decode_scaled_into(bytes, limits, factor, image),
         InputFormat::OpenExr => exr::decode_scaled_into(bytes, limits, factor, image),
         InputFormat::Pfm => {
@@ -165,10 +179,34 @@ pub fn read_bytes(path: &Path, limits: &Limits, bytes: &mut Vec<u8>) -> Result<I
 /// assert!(err.to_string().contains("unrecognised"));
 /// # Ok::<(), visadapt::Error>(())
 /// ```
-pub fn read_from(mut reader: impl std::io::Read, limits: &Limits) -> Result<HdrImage> {
+pub fn read_from(reader: impl std::io::Read, limits: &Limits) -> Result<HdrImage> {
+    read_scaled_from(reader, limits, 1.0)
+}
+
+/// [`read_from`] with every value multiplied by `factor`, in the decoder's conversion
+/// where it has one: the same values as [`read_scaled`] of the same bytes in a file, bit
+/// for bit (`visadapt map - --scale S` reads standard input so).
+///
+/// ```
+/// use visadapt::{HdrImage, Limits, io};
+/// let mut scene = HdrImage::zeros(4, 2);
+/// scene.y.fill(0.5);
+/// let mut exr = std::io::Cursor::new(Vec::new());
+/// io::exr::write_hdr(&scene, &mut exr)?;
+/// let back = io::read_scaled_from(exr.get_ref().as_slice(), &Limits::default(), 179.0)?;
+/// assert!((back.y[0] - 89.5).abs() < 1e-4);
+/// # Ok::<(), visadapt::Error>(())
+/// ```
+pub fn read_scaled_from(
+    mut reader: impl std::io::Read,
+    limits: &Limits,
+    factor: f32,
+) -> Result<HdrImage> {
     let mut bytes = Vec::new();
-    read_bytes_from(&mut reader, None, limits, &mut bytes)?;
-    decode(&bytes, limits)
+    let format = read_bytes_from(&mut reader, None, limits, &mut bytes)?;
+    let mut image = HdrImage::zeros(0, 0);
+    decode_scaled_into(format, &bytes, limits, factor, &mut image)?;
+    Ok(image)
 }
 
 /// [`read_bytes`] from any reader; `on_disk` is its length when known (a regular file), to
