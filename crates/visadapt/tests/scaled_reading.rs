@@ -129,6 +129,42 @@ fn radiance_files_read_scaled_agree_with_scaling_after() {
     std::fs::remove_file(&path).unwrap();
 }
 
+/// A factor that the Radiance matrix cannot take (its entries, 179 / EXPOSURE × factor,
+/// would pass the decoder's bound of 1e250) is applied after decoding: here EXPOSURE is
+/// 1e-215 and the factor 1e36 (entries about 2e253). Every value saturates either way;
+/// the read succeeds and gives `HdrImage::scale`'s values bit for bit.
+#[test]
+fn a_factor_beyond_the_radiance_matrix_bound_is_applied_after_decoding() {
+    let mut bytes = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\nEXPOSURE=1e-215\n\n-Y 2 +X 3\n".to_vec();
+    // Flat RGBE pixels: grey 0.5, red 1.0, black, a tiny blue, and two more greys.
+    for rgbe in [[128, 128, 128, 128], [128, 0, 0, 129], [0, 0, 0, 0]] {
+        bytes.extend_from_slice(&rgbe);
+    }
+    for rgbe in [[0, 0, 128, 1], [200, 200, 200, 120], [64, 64, 64, 140]] {
+        bytes.extend_from_slice(&rgbe);
+    }
+    let path = temp("tiny-exposure.hdr");
+    std::fs::write(&path, &bytes).unwrap();
+    let limits = Limits::default();
+    let factor = 1e36f32;
+    let scaled = io::read_scaled(&path, &limits, factor).unwrap();
+    let mut after = io::read(&path, &limits).unwrap();
+    after.scale(factor);
+    for (s, a) in planes(&scaled).into_iter().zip(planes(&after)) {
+        assert!(
+            s.iter().zip(a).all(|(&s, &a)| same_bits(s, a)),
+            "{s:?} {a:?}"
+        );
+    }
+    // Black stays black; the others saturate at the largest finite value.
+    assert_eq!(scaled.y[2], 0.0);
+    assert_eq!(scaled.y[0], f32::MAX, "{:?}", scaled.y);
+    // Below the bound the factor goes into the matrix: the same saturated values.
+    let below = io::read_scaled(&path, &limits, 1e30).unwrap();
+    assert_eq!(below.y[0], f32::MAX);
+    std::fs::remove_file(&path).unwrap();
+}
+
 #[test]
 fn openexr_files_read_scaled_agree_with_scaling_after() {
     // Luminance only, and a lone G channel from about 6e-39 to 1.7e38 (products that
