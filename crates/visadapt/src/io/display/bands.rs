@@ -616,17 +616,57 @@ fn paeth_predictor(a: u8, b: u8, c: u8) -> u8 {
     if not_a { b_or_c } else { a }
 }
 
-/// The sum of the bytes' absolute values as signed bytes (the adaptive filter's cost).
+/// The sum of the bytes' absolute values as signed bytes (the adaptive filter's cost):
+/// in 32 `u16` lanes (one AVX2 vector of bytes widened to two) over blocks of
+/// [`SUM_ABS_STEPS`] steps, then in `u64`. The compiler widened each byte to `u32` for a
+/// single running sum, 8 bytes per instruction: a 5 761-byte row took 0.43 µs that way
+/// and 0.20 µs this way (AVX2, scratch timing, three rounds), four times per row.
 #[inline(always)]
 fn sum_abs(bytes: &[u8]) -> u64 {
+    const LANES: usize = 32;
     let mut sum = 0u64;
-    for chunk in bytes.chunks(4096) {
-        // At most 4096 × 128 per chunk: fits a u32.
-        let mut acc = 0u32;
-        for &b in chunk {
-            acc += u32::from((b as i8).unsigned_abs());
+    for block in bytes.chunks(LANES * SUM_ABS_STEPS) {
+        let mut lanes = [0u16; LANES];
+        let mut steps = block.chunks_exact(LANES);
+        for step in &mut steps {
+            for (lane, &b) in lanes.iter_mut().zip(step) {
+                *lane += u16::from((b as i8).unsigned_abs());
+            }
         }
-        sum += u64::from(acc);
+        sum += lanes.iter().map(|&l| u64::from(l)).sum::<u64>();
+        for &b in steps.remainder() {
+            sum += u64::from((b as i8).unsigned_abs());
+        }
     }
     sum
+}
+
+/// Steps of [`sum_abs`]'s lanes per block: each adds at most 128 (`|−128|`) to a lane, and
+/// 256 × 128 = 32 768 fits a `u16`.
+const SUM_ABS_STEPS: usize = 256;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// [`sum_abs`] against a byte-by-byte sum: every byte value, and rows of `0x80` (the
+    /// largest cost, 128 per byte) long enough to fill a block's `u16` lanes and spill
+    /// into a remainder.
+    #[test]
+    fn sum_abs_is_the_sum_of_the_signed_magnitudes() {
+        let plain = |bytes: &[u8]| -> u64 {
+            bytes
+                .iter()
+                .map(|&b| (i64::from(b as i8)).unsigned_abs())
+                .sum()
+        };
+        let every: Vec<u8> = (0..=255u8).cycle().take(3 * 8192 + 77).collect();
+        for len in [0, 1, 31, 32, 33, 8191, 8192, 8193, every.len()] {
+            assert_eq!(sum_abs(&every[..len]), plain(&every[..len]), "{len}");
+        }
+        for len in [8192, 8192 + 31, 5 * 8192 + 1] {
+            let worst = vec![0x80u8; len];
+            assert_eq!(sum_abs(&worst), 128 * len as u64, "{len}");
+        }
+    }
 }
