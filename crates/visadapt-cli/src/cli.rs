@@ -1047,7 +1047,8 @@ pub struct SequenceArgs {
     /// Also write all frames as one animated PNG, in the real time of the sequence sped
     /// up to play in --apng-seconds: each frame shows until the next frame's time; the
     /// first (before the switch) and the last are held for a sixth of the playback each.
-    /// The speed-up is printed.
+    /// The speed-up is printed. (--png-compression applies to the frames; the animation
+    /// is always compressed at the png crate's fast level.)
     #[arg(long, value_name = "FILE")]
     pub apng: Option<PathBuf>,
 
