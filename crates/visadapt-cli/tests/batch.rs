@@ -226,15 +226,10 @@ fn standard_input_is_scaled_as_a_file_is() {
                 .args(["--scale", "179", "-o"])
                 .arg(&by_file),
         );
-        let out = visadapt()
-            .args(["map", "-", "--scale", "179", "--format", "exr", "-o", "-"])
-            .write_stdin(std::fs::read(&input).unwrap())
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = succeed(
+            visadapt()
+                .args(["map", "-", "--scale", "179", "--format", "exr", "-o", "-"])
+                .write_stdin(std::fs::read(&input).unwrap()),
         );
         assert!(
             out.stdout == std::fs::read(&by_file).unwrap(),
